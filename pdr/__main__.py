@@ -1,0 +1,3 @@
+from pdr.cli.main import entry_point
+
+entry_point()

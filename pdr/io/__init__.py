@@ -1,0 +1,1 @@
+"""Recordings on disk: the canonical format of CONTRACT.md, atomic writers, importers of other formats."""

@@ -1,0 +1,1 @@
+"""The use cases: steps, run, calibrate, batch, gait forms; each ties the algorithm packages together."""

@@ -1,0 +1,37 @@
+"""Shared fixtures: small canonical recordings and the paths of the real data."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from pdr.constants import GRAVITY_MPS2
+from pdr.io.recording import Recording, save_recording
+
+ROOT = Path(__file__).resolve().parents[1]
+DATASETS = ROOT / "datasets"
+
+
+def make_imu(duration_s: float = 10.0, rate_hz: float = 100.0, step_hz: float = 1.8, seed: int = 0) -> pd.DataFrame:
+    """A plain walking-like IMU table in SI units (for I/O tests, not for accuracy)."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, duration_s, 1.0 / rate_hz)
+    vert = GRAVITY_MPS2 + 2.0 * np.sin(2 * np.pi * step_hz * t)
+    return pd.DataFrame({
+        "t_s": t,
+        "acc_x_mps2": 0.3 * rng.standard_normal(len(t)),
+        "acc_y_mps2": 0.3 * rng.standard_normal(len(t)),
+        "acc_z_mps2": vert,
+        "gyr_x_radps": 0.05 * rng.standard_normal(len(t)),
+        "gyr_y_radps": 0.05 * rng.standard_normal(len(t)),
+        "gyr_z_radps": 0.05 * rng.standard_normal(len(t)),
+    })
+
+
+@pytest.fixture
+def small_recording(tmp_path: Path) -> Path:
+    rec = Recording(meta={"recording": {"id": "small", "placement": "waist"}, "subject": {"height_m": 1.75}}, imu=make_imu())
+    return save_recording(rec, tmp_path / "small")
