@@ -1,0 +1,1 @@
+"""Accuracy and speed benchmarks: ``python -m benchmarks [--quick] [NAME ...]`` (or ``make bench``)."""
