@@ -1,0 +1,13 @@
+"""Optical flow measurement of a leg-camera video (Liu, MS thesis ch. 2): per frame pair, px/s, with a quality."""
+
+from pdr.flow.methods import (
+    FLOW_COLUMNS,
+    CorrelationOpticalFlow,
+    InterpolationOpticalFlow,
+    PhaseCorrelationOpticalFlow,
+)
+from pdr.flow.video import read_video
+
+__all__ = [
+    "FLOW_COLUMNS", "CorrelationOpticalFlow", "InterpolationOpticalFlow", "PhaseCorrelationOpticalFlow", "read_video",
+]
