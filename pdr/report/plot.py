@@ -1,0 +1,59 @@
+"""``trajectory.png``: the path, its 1-sigma uncertainty ellipses, GNSS fixes used and dropped (matplotlib, Agg backend)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from pdr.io.atomic import atomic_path
+
+MAX_ELLIPSES = 60  # ellipses drawn at evenly spaced poses; more would hide the path
+SIGMA_SCALE = 1.0
+
+
+def write_plot(path: Path, traj: pd.DataFrame, *, gnss: pd.DataFrame | None = None, title: str = "") -> None:
+    """Draw the trajectory in the local east/north frame.
+
+    Parameters
+    ----------
+    traj : ``t_s, e_m, n_m, heading_rad, e_std_m, n_std_m``.
+    gnss : optional ``t_s, e_m, n_m, used`` (bool): fixes the run used (dots) and those it dropped (crosses: masked,
+        invalid or rejected as outliers).
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib.figure import Figure
+    from matplotlib.patches import Ellipse
+
+    fig = Figure(figsize=(7.0, 7.0), dpi=110)
+    ax = fig.subplots()
+    e, n = traj["e_m"].to_numpy(), traj["n_m"].to_numpy()
+    e_std, n_std = traj["e_std_m"].to_numpy(), traj["n_std_m"].to_numpy()
+    idx = np.unique(np.linspace(0, len(traj) - 1, min(len(traj), MAX_ELLIPSES)).round().astype(int)) if len(traj) else []
+    first = True
+    for i in idx:
+        if np.isfinite(e_std[i]) and np.isfinite(n_std[i]) and (e_std[i] > 0 or n_std[i] > 0):
+            ax.add_patch(Ellipse((e[i], n[i]), 2 * SIGMA_SCALE * e_std[i], 2 * SIGMA_SCALE * n_std[i], facecolor="tab:blue",
+                                 alpha=0.12, edgecolor="none", label="1-sigma uncertainty" if first else None))
+            first = False
+    if gnss is not None and len(gnss):
+        ok = np.isfinite(gnss["e_m"].to_numpy()) & np.isfinite(gnss["n_m"].to_numpy())
+        used = gnss["used"].to_numpy(bool) & ok
+        dropped = ~gnss["used"].to_numpy(bool) & ok
+        ax.plot(gnss["e_m"][used], gnss["n_m"][used], "o", ms=3, color="tab:green", label=f"GNSS used ({used.sum()})")
+        ax.plot(gnss["e_m"][dropped], gnss["n_m"][dropped], "x", ms=4, color="tab:red", label=f"GNSS dropped ({dropped.sum()})")
+    ax.plot(e, n, "-", lw=1.2, color="tab:blue", label="trajectory")
+    if len(traj):
+        ax.plot(e[:1], n[:1], "^", color="black", label="start")
+        ax.plot(e[-1:], n[-1:], "s", color="black", label="end")
+    ax.set_xlabel("east (m)")
+    ax.set_ylabel("north (m)")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.grid(True, lw=0.3)
+    ax.set_title(title, fontsize=10)
+    ax.legend(loc="best", fontsize=8)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png", metadata={"Software": None})

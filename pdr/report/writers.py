@@ -1,0 +1,164 @@
+"""Writers for the outputs of ``pdr run`` (CONTRACT.md "Outputs of pdr run").
+
+Every writer goes through :mod:`pdr.io.atomic` (temporary name, then rename) and is deterministic: fixed float
+formats, sorted JSON keys, no time stamps. Tables are the flat, unit-named tables of the pipeline:
+
+- a trajectory: ``t_s, e_m, n_m, heading_rad, e_std_m, n_std_m`` (first row = the start pose, then one row per step);
+- steps: ``step_id, t_s, step_length_m, step_length_std_m, step_freq_hz, heading_rad, source``;
+- strides: ``t_start_s, t_end_s, foot, length_m, length_std_m, source``.
+
+Frames: east-north-up local frame of the recording's ``[geo]`` origin, heading counter-clockwise from east.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import xml.etree.ElementTree as ET
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from pdr import __version__
+from pdr.errors import InputError
+from pdr.geo import en_to_latlon
+from pdr.io.atomic import write_csv, write_text
+
+CSV_FLOAT_FORMAT = "%.10g"  # 10 significant digits: 1 mm at 1,000 km, 1e-8 deg of latitude (1 mm)
+TRAJECTORY_COLUMNS = ("t_s", "e_m", "n_m", "heading_rad", "e_std_m", "n_std_m")
+STEPS_COLUMNS = ("step_id", "t_s", "step_length_m", "step_length_std_m", "step_freq_hz", "heading_rad", "source")
+STRIDES_COLUMNS = ("t_start_s", "t_end_s", "foot", "length_m", "length_std_m", "source")
+GPX_NS = "http://www.topografix.com/GPX/1/1"
+
+
+def _require(df: pd.DataFrame, columns: tuple[str, ...], what: str) -> None:
+    missing = [c for c in columns if c not in df.columns]
+    if missing:
+        raise InputError(f"{what}: expected columns {', '.join(columns)}, found {', '.join(map(str, df.columns)) or 'none'}")
+
+
+def trajectory_table(traj: pd.DataFrame, origin: tuple[float, float] | None) -> pd.DataFrame:
+    """The ``trajectory.csv`` table: the contract columns first, plus ``lat_deg, lon_deg`` when ``origin`` is known."""
+    _require(traj, TRAJECTORY_COLUMNS, "trajectory")
+    table = traj[list(TRAJECTORY_COLUMNS)].astype(float).reset_index(drop=True)
+    if origin is not None:
+        lat, lon = en_to_latlon(table["e_m"].to_numpy(), table["n_m"].to_numpy(), origin)
+        table["lat_deg"], table["lon_deg"] = lat, lon
+    return table
+
+
+def steps_table(steps: pd.DataFrame) -> pd.DataFrame:
+    """The ``steps.csv`` table: contract columns in contract order, then ``bout_id`` when present."""
+    _require(steps, STEPS_COLUMNS, "steps")
+    extra = [c for c in ("bout_id",) if c in steps.columns]
+    return steps[list(STEPS_COLUMNS) + extra].reset_index(drop=True)
+
+
+def write_trajectory_csv(path: Path, traj: pd.DataFrame, origin: tuple[float, float] | None = None) -> None:
+    write_csv(path, trajectory_table(traj, origin), float_format=CSV_FLOAT_FORMAT)
+
+
+def write_steps_csv(path: Path, steps: pd.DataFrame) -> None:
+    write_csv(path, steps_table(steps), float_format=CSV_FLOAT_FORMAT)
+
+
+def write_strides_csv(path: Path, strides: pd.DataFrame) -> None:
+    _require(strides, STRIDES_COLUMNS, "strides")
+    write_csv(path, strides[list(STRIDES_COLUMNS)].reset_index(drop=True), float_format=CSV_FLOAT_FORMAT)
+
+
+def jsonable(value: Any) -> Any:
+    """Plain JSON values: numpy scalars and arrays converted, floats to 9 significant digits, NaN/inf -> null."""
+    if isinstance(value, dict):
+        return {str(k): jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple, np.ndarray)):
+        return [jsonable(v) for v in value]
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        value = float(value)
+        return float(f"{value:.9g}") if math.isfinite(value) else None
+    if isinstance(value, Path):
+        return str(value)
+    if value is None or isinstance(value, str):
+        return value
+    raise TypeError(f"cannot write {type(value).__name__} to JSON")
+
+
+def dumps_json(obj: Any) -> str:
+    return json.dumps(jsonable(obj), indent=2, sort_keys=True, allow_nan=False) + "\n"
+
+
+def write_json(path: Path, obj: Any) -> None:
+    """A JSON object with sorted keys, 2-space indent, floats at 9 significant digits (deterministic)."""
+    write_text(path, dumps_json(obj))
+
+
+def yaw_to_quaternion_xyzw(yaw_rad: np.ndarray) -> np.ndarray:
+    """Unit quaternions ``(qx, qy, qz, qw)`` of rotations by ``yaw_rad`` about the up (z) axis."""
+    yaw = np.asarray(yaw_rad, float)
+    zeros = np.zeros_like(yaw)
+    return np.stack([zeros, zeros, np.sin(yaw / 2.0), np.cos(yaw / 2.0)], axis=-1)
+
+
+def tum_text(traj: pd.DataFrame) -> str:
+    """TUM RGB-D trajectory text: one ``t x y z qx qy qz qw`` line per pose (x = east, y = north, z = 0).
+
+    This is the format ``evo`` reads (``evo_traj tum trajectory.tum``); the leading ``#`` line is a comment.
+    """
+    _require(traj, TRAJECTORY_COLUMNS, "trajectory")
+    q = yaw_to_quaternion_xyzw(traj["heading_rad"].to_numpy())
+    lines = ["# t x y z qx qy qz qw  (pdr: x east, y north, metres; yaw counter-clockwise from east)"]
+    for t, e, n, (qx, qy, qz, qw) in zip(traj["t_s"].to_numpy(), traj["e_m"].to_numpy(), traj["n_m"].to_numpy(), q):
+        lines.append(f"{t:.6f} {e:.6f} {n:.6f} 0.000000 {qx:.9f} {qy:.9f} {qz:.9f} {qw:.9f}")
+    return "\n".join(lines) + "\n"
+
+
+def write_tum(path: Path, traj: pd.DataFrame) -> None:
+    write_text(path, tum_text(traj))
+
+
+def geojson_object(traj: pd.DataFrame, origin: tuple[float, float] | None, *, name: str = "") -> dict[str, Any]:
+    """A GeoJSON FeatureCollection with the path as one LineString.
+
+    With a geo origin, coordinates are ``[lon, lat]`` in degrees (RFC 7946); without one they are ``[east, north]`` in
+    metres of the local frame, and the feature's ``frame`` property says so. ``t_s`` gives the time of each vertex.
+    """
+    table = trajectory_table(traj, origin)
+    if origin is not None:
+        coords = [[round(float(lo), 9), round(float(la), 9)] for lo, la in zip(table["lon_deg"], table["lat_deg"])]
+        frame = "WGS84 lon/lat (deg)"
+    else:
+        coords = [[round(float(e), 4), round(float(n), 4)] for e, n in zip(table["e_m"], table["n_m"])]
+        frame = "local east/north (m), no geo origin"
+    props: dict[str, Any] = {"name": name, "frame": frame, "t_s": [round(float(t), 6) for t in table["t_s"]]}
+    if origin is not None:
+        props["origin_lat_deg"], props["origin_lon_deg"] = origin
+    return {"type": "FeatureCollection",
+            "features": [{"type": "Feature", "properties": props, "geometry": {"type": "LineString", "coordinates": coords}}]}
+
+
+def write_geojson(path: Path, traj: pd.DataFrame, origin: tuple[float, float] | None, *, name: str = "") -> None:
+    write_text(path, json.dumps(geojson_object(traj, origin, name=name), sort_keys=True, allow_nan=False) + "\n")
+
+
+def gpx_text(traj: pd.DataFrame, origin: tuple[float, float], *, name: str = "") -> str:
+    """A GPX 1.1 document with one track of the path (``trkpt lat lon``; the recording has no absolute clock, so no ``time``)."""
+    table = trajectory_table(traj, origin)
+    ET.register_namespace("", GPX_NS)
+    root = ET.Element(f"{{{GPX_NS}}}gpx", {"version": "1.1", "creator": f"pdr {__version__}"})
+    trk = ET.SubElement(root, f"{{{GPX_NS}}}trk")
+    ET.SubElement(trk, f"{{{GPX_NS}}}name").text = name
+    seg = ET.SubElement(trk, f"{{{GPX_NS}}}trkseg")
+    for lat, lon in zip(table["lat_deg"], table["lon_deg"]):
+        ET.SubElement(seg, f"{{{GPX_NS}}}trkpt", {"lat": f"{lat:.9f}", "lon": f"{lon:.9f}"})
+    ET.indent(root)
+    return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
+
+
+def write_gpx(path: Path, traj: pd.DataFrame, origin: tuple[float, float], *, name: str = "") -> None:
+    write_text(path, gpx_text(traj, origin, name=name))
