@@ -94,6 +94,13 @@ def test_absent_reference_metrics_are_omitted(tmp_path):
         assert key not in m
 
 
+def test_reference_step_count_prefers_summary(tmp_path):
+    t, _ = _ref_path()
+    out, rec = _make_case(tmp_path, reference={"steps": pd.DataFrame({"t_s": t[1:]}), "summary": {"n_steps": 62}})
+    m = evaluate_run(out, rec)
+    assert m["n_steps_ref"] == 62 and m["step_count_error"] == -9 and m["step_recall"] == pytest.approx(50 / 60)
+
+
 def test_landmarks_only_reference_leaves_the_anchor_out(tmp_path):
     t, xy = _ref_path()
     lms = pd.DataFrame({"t_s": [0.0, 10.0, 20.0, 30.0], "e_m": [0.0, 10.0, 10.0, 0.0], "n_m": [0.0, 0.0, 10.0, 10.0]})

@@ -58,7 +58,8 @@ def _step_metrics(est_steps: pd.DataFrame, ref: dict[str, Any], tolerance_s: flo
     m: dict[str, Any] = {}
     n_est = len(est_steps)
     ref_steps = ref.get("steps")
-    n_ref = len(ref_steps) if ref_steps is not None else ref.get("summary", {}).get("n_steps")
+    # summary.n_steps first: a reference may count contacts whose time it does not know (no row in steps.csv)
+    n_ref = ref.get("summary", {}).get("n_steps", len(ref_steps) if ref_steps is not None else None)
     if n_ref is not None:
         n_ref = int(n_ref)
         m["n_steps_ref"] = n_ref
