@@ -19,8 +19,8 @@ def write_plot(path: Path, traj: pd.DataFrame, *, gnss: pd.DataFrame | None = No
     Parameters
     ----------
     traj : ``t_s, e_m, n_m, heading_rad, e_std_m, n_std_m``.
-    gnss : optional ``t_s, e_m, n_m, used`` (bool): fixes the run used (dots) and those it dropped (crosses: masked,
-        invalid or rejected as outliers).
+    gnss : optional ``t_s, e_m, n_m, used`` (bool) and optional ``masked`` (bool): fixes the run used (green dots), those
+        it dropped (red crosses: rejected as outliers or not fused) and those masked by the configuration (grey pluses).
     """
     import matplotlib
 
@@ -41,10 +41,13 @@ def write_plot(path: Path, traj: pd.DataFrame, *, gnss: pd.DataFrame | None = No
             first = False
     if gnss is not None and len(gnss):
         ok = np.isfinite(gnss["e_m"].to_numpy()) & np.isfinite(gnss["n_m"].to_numpy())
+        masked = gnss["masked"].to_numpy(bool) & ok if "masked" in gnss.columns else np.zeros(len(gnss), bool)
         used = gnss["used"].to_numpy(bool) & ok
-        dropped = ~gnss["used"].to_numpy(bool) & ok
+        dropped = ~gnss["used"].to_numpy(bool) & ok & ~masked
         ax.plot(gnss["e_m"][used], gnss["n_m"][used], "o", ms=3, color="tab:green", label=f"GNSS used ({used.sum()})")
         ax.plot(gnss["e_m"][dropped], gnss["n_m"][dropped], "x", ms=4, color="tab:red", label=f"GNSS dropped ({dropped.sum()})")
+        if masked.any():
+            ax.plot(gnss["e_m"][masked], gnss["n_m"][masked], "+", ms=4, color="tab:gray", label=f"GNSS masked ({masked.sum()})")
     ax.plot(e, n, "-", lw=1.2, color="tab:blue", label="trajectory")
     if len(traj):
         ax.plot(e[:1], n[:1], "^", color="black", label="start")
