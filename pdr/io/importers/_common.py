@@ -253,3 +253,25 @@ def steady_clock(t: np.ndarray, values: np.ndarray, what: str) -> tuple[np.ndarr
     warnings.warn(f"{what}: sample intervals vary wildly (interquartile {q25 * 1e3:.2f} to {q75 * 1e3:.2f} ms); "
                   f"resampled linearly to a uniform {rate:g} Hz grid", stacklevel=3)
     return grid, interp_columns(grid, t, values)
+
+
+def resample_mean(t_new: np.ndarray, t: np.ndarray, values: np.ndarray, rate_hz: float) -> np.ndarray:
+    """Each column of ``values`` (irregular, increasing ``t``) averaged over ``[t_new - h/2, t_new + h/2]``, h = 1/rate.
+
+    The mean over a window of one output period (from the cumulative trapezoid integral, so irregular spacing is
+    weighted correctly) is a box low-pass filter with its first null at ``rate_hz``: downsampling an irregular
+    ~400 Hz phone clock to 200 Hz this way aliases far less than picking or interpolating samples.
+    ``t_new +- h/2`` must lie within ``[t[0], t[-1]]``.
+    """
+    values = np.asarray(values, float).reshape(len(t), -1)
+    h = 1.0 / rate_hz
+    dt = np.diff(t)[:, None]
+    cum = np.vstack([np.zeros((1, values.shape[1])), np.cumsum(0.5 * (values[1:] + values[:-1]) * dt, axis=0)])
+    lo, hi = t_new - h / 2, t_new + h / 2
+    # integral at any instant: cumulative value at the previous sample + the trapezoid of the partial interval
+    def integral(x: np.ndarray) -> np.ndarray:
+        i = np.clip(np.searchsorted(t, x, side="right") - 1, 0, len(t) - 2)
+        frac = ((x - t[i]) / (t[i + 1] - t[i]))[:, None]
+        v0, v1 = values[i], values[i + 1]
+        return cum[i] + (x - t[i])[:, None] * (v0 + 0.5 * frac * (v1 - v0))
+    return (integral(hi) - integral(lo)) / h
