@@ -1,0 +1,263 @@
+"""The SLIP walking model, its leg kinematics and the leg-camera optical flow it predicts (Liu, MS thesis ch. 3).
+
+Sagittal plane, x forward, y up, ground at y = 0, angles from the vertical, positive when the lower end of the
+segment is ahead of its upper end. One simulated stride of the camera leg is two identical SLIP steps (the
+thesis re-imposes the start velocity at every heel strike): the camera leg's stance (heel contact, then toe
+contact) and the other leg's stance, during which the camera leg leaves the ground and swings.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+from scipy.integrate import solve_ivp
+
+from pdr.constants import GRAVITY_MPS2
+from pdr.errors import InputError
+
+
+@dataclasses.dataclass(frozen=True)
+class SlipBody:
+    """Body parameters of the SLIP model (thesis Table 1 as defaults).
+
+    Attributes
+    ----------
+    thigh_length_m, shank_length_m, foot_length_m : L_th (hip-knee), L_sh (knee-heel), L_ft (heel-toe).
+    mass_kg : the lumped mass m at the hip.
+    """
+
+    thigh_length_m: float = 0.5
+    shank_length_m: float = 0.6
+    foot_length_m: float = 0.2
+    mass_kg: float = 50.0
+
+    def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):
+            v = getattr(self, f.name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise InputError(f"SlipBody: expected a positive {f.name}, found {v!r}")
+
+    @property
+    def leg_length_m(self) -> float:
+        """L_ref = L_th + L_sh (eq. 3.4)."""
+        return self.thigh_length_m + self.shank_length_m
+
+
+@dataclasses.dataclass
+class SlipStep:
+    """One SLIP step, heel strike to the next heel strike (hip at x = 0 at the start).
+
+    Attributes
+    ----------
+    duration_s : time to the next heel strike.
+    length_m : hip (= contact point) advance over the step.
+    heel_x_m : the contact point x_H (eq. 3.6).
+    t_hc_s : end of phase 1 (the hip rises back through h_crit): end of heel contact in the kinematics.
+    sol : callable t -> (4, n) state (x, vx, y, vy), dense output of both phases.
+    """
+
+    duration_s: float
+    length_m: float
+    heel_x_m: float
+    t_hc_s: float
+    sol: object
+    crit_height_m: float
+
+
+def _rhs(body: SlipBody, stiffness_npm: float, heel_x_m: float):
+    lref, m = body.leg_length_m, body.mass_kg
+
+    def f(_t, s):
+        x, vx, y, vy = s
+        dx, dy = x - heel_x_m, y
+        length = math.hypot(dx, dy)
+        force = stiffness_npm * (lref - length) if length < lref else 0.0  # eq. 3.2
+        return [vx, force * dx / (m * length), vy, force * dy / (m * length) - GRAVITY_MPS2]  # eq. 3.1
+
+    return f
+
+
+def simulate_step(vx_mps: float, vy_mps: float, leg_angle_rad: float, stiffness_npm: float,
+                  body: SlipBody = SlipBody(), *, max_time_s: float = 2.0) -> SlipStep | None:
+    """Integrate one SLIP step (eq. 3.1-3.6) with event detection; None if the model falls or stalls.
+
+    The step starts at heel strike: hip at (0, h_crit) with h_crit = L_ref cos(delta) (eq. 3.5), contact point
+    x_H = h_crit tan(delta) ahead (eq. 3.6). Phase 1 ends when the hip rises back through h_crit, phase 2 when it
+    descends through h_crit again: the next heel strike (thesis Appendix C).
+    """
+    lref = body.leg_length_m
+    hcrit = lref * math.cos(leg_angle_rad)
+    heel_x = hcrit * math.tan(leg_angle_rad)
+    f = _rhs(body, stiffness_npm, heel_x)
+
+    def rise(_t, s):
+        return s[2] - (hcrit + 1e-9)
+
+    rise.terminal, rise.direction = True, 1
+
+    def fall(_t, s):
+        return s[2] - hcrit
+
+    fall.terminal, fall.direction = True, -1
+
+    def collapse(_t, s):
+        return s[2] - 0.5 * hcrit
+
+    collapse.terminal, collapse.direction = True, -1
+
+    def stall(_t, s):
+        return s[1]
+
+    stall.terminal, stall.direction = True, -1
+
+    opts = dict(method="RK45", rtol=1e-6, atol=1e-8, dense_output=True)
+    s0 = [0.0, vx_mps, hcrit, vy_mps]
+    p1 = solve_ivp(f, (0.0, max_time_s), s0, events=(rise, collapse, stall), **opts)
+    if p1.status != 1 or len(p1.t_events[0]) == 0:
+        return None
+    t1 = float(p1.t_events[0][0])
+    p2 = solve_ivp(f, (t1, max_time_s), p1.y_events[0][0], events=(fall, collapse, stall), **opts)
+    if p2.status != 1 or len(p2.t_events[0]) == 0:
+        return None
+    t2 = float(p2.t_events[0][0])
+    x_end = float(p2.y_events[0][0][0])
+    if x_end <= 0:
+        return None
+    s1, s2 = p1.sol, p2.sol
+
+    def sol(t):
+        t = np.asarray(t, dtype=float)
+        return np.where(t < t1, s1(np.minimum(t, t1)), s2(np.clip(t, t1, t2)))
+
+    return SlipStep(duration_s=t2, length_m=x_end, heel_x_m=heel_x, t_hc_s=t1, sol=sol, crit_height_m=hcrit)
+
+
+def _two_link_knee(hip: np.ndarray, end: np.ndarray, l_upper: float, l_lower: float) -> np.ndarray:
+    """Knee of a two-link chain hip-knee-end (lengths l_upper, l_lower), bent forward (+x); a chain longer than
+    its links is held straight (eq. 3.12 solved with the unit-length constraints)."""
+    d = hip - end
+    dist = np.hypot(d[:, 0], d[:, 1])
+    cos_a = np.clip((dist ** 2 + l_lower ** 2 - l_upper ** 2) / (2 * dist * l_lower), -1.0, 1.0)
+    a = np.arccos(cos_a)
+    ang = np.arctan2(d[:, 1], d[:, 0]) - a  # rotate end->hip clockwise: the knee comes forward
+    return end + l_lower * np.column_stack([np.cos(ang), np.sin(ang)])
+
+
+@dataclasses.dataclass
+class StrideKinematics:
+    """Camera-leg kinematics over one simulated stride, sampled at ``t_s`` (0 = heel strike).
+
+    Attributes
+    ----------
+    t_s, hip_m, knee_m, heel_m : time and (n, 2) positions.
+    shank_angle_rad : angle of the shank from the vertical (heel ahead of knee positive).
+    camera_m : (n, 2) camera focal point (eq. 3.7); distance_m: D along the optical axis to the ground (eq. 3.9).
+    phase : 0 heel contact, 1 toe contact, 2 swing.
+    length_m, duration_s : stride length and duration.
+    """
+
+    t_s: np.ndarray
+    hip_m: np.ndarray
+    knee_m: np.ndarray
+    heel_m: np.ndarray
+    shank_angle_rad: np.ndarray
+    camera_m: np.ndarray
+    distance_m: np.ndarray
+    phase: np.ndarray
+    length_m: float
+    duration_s: float
+
+
+def stride_kinematics(step: SlipStep, body: SlipBody, camera_from_knee_m: float, *, stance_fraction: float = 0.6,
+                      swing_ratio: float = 1.2, swing_peak_fraction: float = 0.25, dt_s: float = 0.002) -> StrideKinematics:
+    """Leg kinematics of the camera leg in the three configurations (eq. 3.7-3.17).
+
+    Parameters
+    ----------
+    step : the SLIP step; the stride is this step (camera-leg stance) then an identical one (other leg).
+    stance_fraction : toe off as a fraction of the stride (thesis code: 0.6).
+    swing_ratio : eta = theta_max / theta_int of the shank in swing (eq. 3.16, thesis 1.2).
+    swing_peak_fraction : where in the swing the parabola reaches eta theta_int (thesis Appendix E: 1/4).
+
+    Notes
+    -----
+    Heel contact (heel fixed at x_H, until the end of the SLIP phase 1): knee from the two-link chain hip-knee-heel.
+    Toe contact (foot pivoting about the toe x_T = x_H + L_ft, eq. 3.13-3.15): thigh and a virtual link
+    knee-toe of length sqrt(L_sh² + L_ft²) (foot at right angles to the shank). Swing: thigh angle linear in time
+    from its toe-off value to the leg angle delta at the next heel strike; shank angle a parabola through its
+    toe-off value, eta times it at the peak, and delta at heel strike.
+    """
+    T1, T = step.duration_s, 2.0 * step.duration_s
+    n = max(int(round(T / dt_s)) + 1, 8)
+    t = np.linspace(0.0, T, n)
+    s = step.sol(np.where(t <= T1, t, t - T1))
+    hip = np.column_stack([s[0] + np.where(t <= T1, 0.0, step.length_m), s[2]])
+    lth, lsh, lft = body.thigh_length_m, body.shank_length_m, body.foot_length_m
+    t_to = float(np.clip(stance_fraction, 0.3, 0.9)) * T
+    t_hc = min(step.t_hc_s, t_to)
+    phase = np.where(t <= t_hc, 0, np.where(t <= t_to, 1, 2))
+    knee = np.empty_like(hip)
+    heel = np.empty_like(hip)
+    # heel contact
+    m0 = phase == 0
+    heel0 = np.array([step.heel_x_m, 0.0])
+    heel[m0] = heel0
+    knee[m0] = _two_link_knee(hip[m0], np.broadcast_to(heel0, hip[m0].shape), lth, lsh)
+    # toe contact
+    m1 = phase == 1
+    toe = np.array([step.heel_x_m + lft, 0.0])
+    lvirt = math.hypot(lsh, lft)
+    k1 = _two_link_knee(hip[m1], np.broadcast_to(toe, hip[m1].shape), lth, lvirt)
+    knee[m1] = k1
+    kt = toe - k1
+    ktn = kt / np.hypot(kt[:, 0], kt[:, 1])[:, None]
+    beta = math.atan2(lft, lsh)  # angle knee->toe vs knee->heel
+    cb, sb = math.cos(beta), math.sin(beta)
+    # shank direction: knee->toe rotated clockwise by beta (back under the knee, toward the heel)
+    u = np.column_stack([cb * ktn[:, 0] + sb * ktn[:, 1], -sb * ktn[:, 0] + cb * ktn[:, 1]])
+    heel[m1] = k1 + lsh * u
+    # swing
+    m2 = phase == 2
+    if m2.any():
+        i0 = int(np.flatnonzero(m2)[0]) - 1
+        k0, h0, g0 = knee[i0], heel[i0], hip[i0]
+        th1_0 = math.atan2(k0[0] - g0[0], g0[1] - k0[1])
+        th2_0 = math.atan2(h0[0] - k0[0], k0[1] - h0[1])
+        delta = math.atan2(step.heel_x_m, step.crit_height_m)
+        ts, te = t[i0], T
+        tau = (t[m2] - ts) / (te - ts)
+        th1 = th1_0 + (delta - th1_0) * tau
+        # parabola through (0, th2_0), (p, eta th2_0), (1, delta) in normalised time
+        p = float(np.clip(swing_peak_fraction, 0.05, 0.95))
+        a_mat = np.array([[0.0, 0.0, 1.0], [p * p, p, 1.0], [1.0, 1.0, 1.0]])
+        c2 = np.linalg.solve(a_mat, np.array([th2_0, swing_ratio * th2_0, delta]))
+        th2 = c2[0] * tau ** 2 + c2[1] * tau + c2[2]
+        knee[m2] = hip[m2] + lth * np.column_stack([np.sin(th1), -np.cos(th1)])
+        heel[m2] = knee[m2] + lsh * np.column_stack([np.sin(th2), -np.cos(th2)])
+    sh = heel - knee
+    ang = np.arctan2(sh[:, 0], -sh[:, 1])
+    u = sh / lsh
+    cam = knee + camera_from_knee_m * u
+    with np.errstate(divide="ignore", invalid="ignore"):
+        dist = np.where(u[:, 1] < -1e-3, -cam[:, 1] / u[:, 1], np.inf)  # eq. 3.9
+    return StrideKinematics(t_s=t, hip_m=hip, knee_m=knee, heel_m=heel, shank_angle_rad=ang, camera_m=cam,
+                            distance_m=dist, phase=phase, length_m=2.0 * step.length_m, duration_s=T)
+
+
+def simulate_flow(kin: StrideKinematics, focal_px: float) -> np.ndarray:
+    """Optical flow at the image centre (eq. 3.18), px/s, positive for forward walking.
+
+    F = f (v_C . x_sh / D + omega_sh): the camera velocity normal to the shank over the distance D to the ground
+    plus the shank's angular rate (x_sh: the forward normal of the shank). The image content moves backwards at
+    this rate; the sign is flipped so that walking forward gives positive flow, as the thesis plots it.
+    """
+    t = kin.t_s
+    vel = np.gradient(kin.camera_m, t, axis=0)
+    omega = np.gradient(np.unwrap(kin.shank_angle_rad), t)
+    a = kin.shank_angle_rad
+    normal = np.column_stack([np.cos(a), np.sin(a)])
+    v_n = np.sum(vel * normal, axis=1)
+    dist = np.maximum(kin.distance_m, 0.05)
+    return focal_px * (v_n / dist + omega)
