@@ -1,0 +1,110 @@
+"""A per-user step model as JSON (what ``pdr calibrate`` writes and ``pdr run --model`` reads), and the ``[step_length]``
+configuration section.
+
+The file::
+
+    {"pdr_model_version": 1, "model": "regression",
+     "params": {"a_m": ..., "b_m_per_hz": ..., "c_m_per_m2ps4": ..., "residual_std_m": ..., "covariance": [[...]]},
+     "info": {"n_steps": ..., "distance_m": ..., ...}}
+
+Example
+-------
+>>> from pdr.step_length import RegressionStepLength, save_model, load_model
+>>> save_model(RegressionStepLength.population(), "model.json", n_steps=0)  # doctest: +SKIP
+>>> load_model("model.json").b_m_per_hz  # doctest: +SKIP
+0.384
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from pdr import __version__
+from pdr.errors import InputError
+from pdr.io.atomic import write_text
+from pdr.step_length.models import MODELS, RegressionStepLength, StepLengthModel
+
+MODEL_VERSION = 1
+
+
+def _jsonable(value: Any) -> Any:
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, (np.floating, np.integer)):
+        return value.item()
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def model_to_dict(model: StepLengthModel, **info: Any) -> dict[str, Any]:
+    """The JSON document of a model (see the module docstring)."""
+    if not isinstance(model, StepLengthModel):
+        raise InputError(f"save_model: expected a step-length model, found {type(model).__name__}")
+    model._check_params()
+    return {"pdr_model_version": MODEL_VERSION, "model": model.name, "params": _jsonable(model.get_params()),
+            "info": _jsonable({"pdr_version": __version__, **info})}
+
+
+def save_model(model: StepLengthModel, path: str | Path, **info: Any) -> Path:
+    """Write ``model`` (and free-form ``info``: steps and metres seen, recordings, ...) as JSON, atomically."""
+    path = Path(path)
+    write_text(path, json.dumps(model_to_dict(model, **info), indent=2, sort_keys=True) + "\n")
+    return path
+
+
+def model_from_dict(doc: Any, what: str = "model") -> StepLengthModel:
+    """Rebuild a model from its JSON document; every deviation from the expected shape is an InputError."""
+    if not isinstance(doc, dict):
+        raise InputError(f"{what}: expected a JSON object with pdr_model_version, model, params; found {type(doc).__name__}")
+    version = doc.get("pdr_model_version")
+    if version != MODEL_VERSION:
+        raise InputError(f"{what}: expected pdr_model_version {MODEL_VERSION} (a model written by `pdr calibrate`), "
+                         f"found {version!r}")
+    name = doc.get("model")
+    if name not in MODELS:
+        raise InputError(f"{what}: expected model one of {', '.join(MODELS)}, found {name!r}")
+    params = doc.get("params")
+    if not isinstance(params, dict):
+        raise InputError(f"{what}: expected params to be an object of {MODELS[name].__name__} parameters, found {params!r}")
+    cls = MODELS[name]
+    missing = [p for p in cls.param_names() if p not in params and p not in ("covariance", "sensor_height_m")]
+    if missing:
+        raise InputError(f"{what}: expected params {', '.join(cls.param_names())}, missing {', '.join(missing)}")
+    model = cls.from_config(params)
+    model._check_params()
+    return model
+
+
+def load_model(path: str | Path) -> StepLengthModel:
+    """Read a model file written by :func:`save_model`."""
+    path = Path(path)
+    what = f"model file {path}"
+    if not path.is_file():
+        raise InputError(f"{what}: expected a JSON file from `pdr calibrate`, found nothing there")
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise InputError(f"{what}: expected JSON, found unreadable content ({exc})") from None
+    return model_from_dict(doc, what)
+
+
+def model_from_config(config: dict[str, Any] | None) -> StepLengthModel:
+    """The model of the ``[step_length]`` section: ``model = "regression" | "weinberg" | "kim" | "zijlstra"`` (default
+    regression) and any of its parameters, which override the population preset."""
+    section = dict((config or {}).get("step_length") or {})
+    name = section.pop("model", RegressionStepLength.name)
+    if name not in MODELS:
+        raise InputError(f"configuration [step_length]: expected model one of {', '.join(MODELS)}, found {name!r}")
+    model = MODELS[name].population(**section)
+    model._check_params()
+    return model
