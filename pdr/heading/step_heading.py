@@ -1,0 +1,196 @@
+"""Walking direction per step from the attitude (VQF) and the horizontal acceleration of each step."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pandas as pd
+from scipy import signal
+
+from pdr.base import Algorithm
+from pdr.errors import InputError
+from pdr.signals.attitude import Attitude, earth_acceleration, quat_mul, rotate, yaw_increments
+from pdr.signals.resample import UniformImu
+
+HEADING_COLUMNS = ["heading_rad", "heading_change_rad", "heading_change_std_rad", "mag_heading_rad", "mag_heading_std_rad"]
+
+
+def wrap(a: np.ndarray) -> np.ndarray:
+    """Angles into (-pi, pi]."""
+    return np.angle(np.exp(1j * np.asarray(a, float)))
+
+
+def walking_direction(acc_enu: np.ndarray, rate_hz: float, step_s: float) -> tuple[float, float]:
+    """Walking direction (rad, CCW from the frame's x axis) of a stretch of earth-frame acceleration, and its quality.
+
+    The horizontal acceleration band-passed around the step frequency oscillates along the direction of travel
+    (the antero-posterior component repeats every step, the medio-lateral one every stride). Its principal axis gives
+    the direction up to 180 degrees; the sign follows from the inverted-pendulum phase relation: the forward
+    acceleration leads the vertical acceleration by a quarter step (it peaks before the vertical peak at double
+    support and turns negative, braking, after it). Quality in [0, 1]: the principal axis' share of the
+    horizontal variance times the normalised quarter-step correlation.
+    """
+    n = len(acc_enu)
+    f = 1.0 / step_s
+    nyq = 0.5 * rate_hz
+    if n < 3 * rate_hz * step_s or 1.4 * f >= nyq:
+        return float("nan"), 0.0
+    sos = signal.butter(2, [f / 1.4 / nyq, 1.4 * f / nyq], btype="band", output="sos")
+    a = signal.sosfiltfilt(sos, acc_enu, axis=0)
+    h, v = a[:, :2], a[:, 2]
+    cov = h.T @ h / n
+    w, vec = np.linalg.eigh(cov)
+    axis = vec[:, 1]
+    share = float((w[1] - w[0]) / max(w[1] + w[0], 1e-12))
+    q = int(round(0.25 * step_s * rate_hz))
+    c = h[: n - q].T @ v[q:] / max(n - q, 1)
+    proj = float(c @ axis)
+    norm = np.sqrt(max(w[1], 1e-12) * max(float(v @ v / n), 1e-12))
+    if proj < 0:
+        axis = -axis
+    return float(np.arctan2(axis[1], axis[0])), share * min(1.0, abs(proj) / norm)
+
+
+def circular_smooth(angle: np.ndarray, weight: np.ndarray, half: int) -> np.ndarray:
+    """Weighted circular mean over ``2 half + 1`` neighbours (NaN angles ignored)."""
+    ok = np.isfinite(angle) & (weight > 0)
+    z = np.where(ok, weight * np.exp(1j * np.where(ok, angle, 0.0)), 0.0)
+    c = np.concatenate([[0.0], np.cumsum(z)])
+    k = np.arange(len(angle))
+    lo, hi = np.clip(k - half, 0, len(angle)), np.clip(k + half + 1, 0, len(angle))
+    s = c[hi] - c[lo]
+    return np.where(np.abs(s) > 1e-12, np.angle(s), np.nan)
+
+
+class AttitudeStepHeading(Algorithm):
+    """Heading per step: device yaw integrated from the attitude plus a smoothed device-to-walking offset.
+
+    Parameters
+    ----------
+    offset_window_steps : the device-to-walking offset is a weighted circular mean over this many steps
+        (a phone held in a hand or carried in a pocket keeps its offset for a while).
+    min_direction_quality : steps whose acceleration gives a weaker direction do not vote for the offset.
+    gyro_arw_rad_per_sqrt_s : angle random walk of the yaw (gyroscope white noise), rad/sqrt(s).
+    step_direction_std_rad : how far one step's direction scatters around the heading (trunk sway).
+    no_gyro_std_rad : heading-change std per step when there is no gyroscope (heading unobservable).
+    mag_norm_tolerance : a magnetic sample is trusted when |B| is within this fraction of the recording's median.
+    mag_dip_tolerance_rad : ... and its dip within this of the median dip.
+    mag_heading_std_rad : std of a trusted magnetic heading.
+
+    Attributes
+    ----------
+    heading_rad_, heading_change_rad_, heading_change_std_rad_, mag_heading_rad_, mag_heading_std_rad_ : per step.
+    offset_rad_ : the device-to-walking offset used at each step.
+    direction_rad_, direction_quality_ : the raw walking direction of each step from the acceleration.
+
+    Notes
+    -----
+    The device yaw is the integral of the attitude's rotation about the earth's up axis (:func:`yaw_increments`), so it
+    is defined whatever way the phone is held. Its frame is VQF's 6D frame: up is up, the zero of heading is arbitrary
+    (the magnetic heading gives the absolute one). The heading-change std grows with the VQF gyro-bias uncertainty
+    times the elapsed time (drift) and with the angle random walk. Without a gyroscope, heading changes are
+    unobservable: 0 with ``no_gyro_std_rad`` and a warning.
+
+    Example
+    -------
+    >>> h = AttitudeStepHeading().estimate(u, attitude, steps)   # doctest: +SKIP
+    """
+
+    def __init__(self, *, offset_window_steps: int = 20, min_direction_quality: float = 0.2,
+                 gyro_arw_rad_per_sqrt_s: float = 0.005, step_direction_std_rad: float = 0.02,
+                 no_gyro_std_rad: float = np.pi / 2, mag_norm_tolerance: float = 0.15,
+                 mag_dip_tolerance_rad: float = np.radians(10.0), mag_heading_std_rad: float = 0.1):
+        self.offset_window_steps = offset_window_steps
+        self.min_direction_quality = min_direction_quality
+        self.gyro_arw_rad_per_sqrt_s = gyro_arw_rad_per_sqrt_s
+        self.step_direction_std_rad = step_direction_std_rad
+        self.no_gyro_std_rad = no_gyro_std_rad
+        self.mag_norm_tolerance = mag_norm_tolerance
+        self.mag_dip_tolerance_rad = mag_dip_tolerance_rad
+        self.mag_heading_std_rad = mag_heading_std_rad
+
+    def estimate(self, u: UniformImu, attitude: Attitude, steps: pd.DataFrame) -> "AttitudeStepHeading":
+        if "t_s" not in steps.columns:
+            raise InputError(f"heading: expected a steps table with t_s, found {', '.join(map(str, steps.columns))}")
+        t = steps["t_s"].to_numpy(float)
+        n = len(t)
+        nan = np.full(n, np.nan)
+        self.direction_rad_, self.direction_quality_, self.offset_rad_ = nan.copy(), np.zeros(n), nan.copy()
+        self.mag_heading_rad_, self.mag_heading_std_rad_ = nan.copy(), nan.copy()
+        if not attitude.has_gyro:
+            if n:
+                warnings.warn("heading: no gyroscope; heading changes are unobservable (0 with a std of "
+                              f"{self.no_gyro_std_rad:.2f} rad per step)", stacklevel=2)
+            self.heading_rad_ = np.zeros(n)
+            self.heading_change_rad_ = np.zeros(n)
+            self.heading_change_std_rad_ = np.full(n, float(self.no_gyro_std_rad))
+            return self
+        if n == 0:
+            self.heading_rad_ = self.heading_change_rad_ = self.heading_change_std_rad_ = np.zeros(0)
+            return self
+        psi = np.concatenate([[0.0], np.cumsum(yaw_increments(attitude.q_wxyz))])
+        dur = np.diff(t, prepend=np.nan)
+        step_s = float(np.nanmedian(dur)) if np.isfinite(dur).any() else 0.5
+        prev = np.where(np.isfinite(dur), t - np.minimum(np.nan_to_num(dur, nan=step_s), 2.0 * step_s), t - step_s)
+        i_lo = np.clip(np.searchsorted(u.t_s, prev), 0, len(u) - 1)
+        i_hi = np.clip(np.searchsorted(u.t_s, t), 0, len(u) - 1)
+        cpsi = np.concatenate([[0.0], np.cumsum(psi)])
+        cnt = np.maximum(i_hi - i_lo + 1, 1)
+        yaw_dev = (cpsi[i_hi + 1] - cpsi[i_lo]) / cnt  # mean device yaw over each step
+
+        acc_e = earth_acceleration(u.acc_mps2, attitude.q_wxyz)
+        bout = steps["bout_id"].to_numpy(int) if "bout_id" in steps.columns else np.zeros(n, int)
+        for b in np.unique(bout):
+            idx = np.flatnonzero(bout == b)
+            tb = t[idx]
+            sb = float(np.median(np.diff(tb))) if len(tb) > 1 else step_s
+            for k, tk in zip(idx, tb):
+                lo = np.searchsorted(u.t_s, tk - 2.0 * sb)
+                hi = np.searchsorted(u.t_s, tk + 2.0 * sb)
+                d, qual = walking_direction(acc_e[lo:hi], u.rate_hz, sb)
+                self.direction_rad_[k], self.direction_quality_[k] = d, qual
+        vote = self.direction_quality_ >= self.min_direction_quality
+        raw_offset = wrap(self.direction_rad_ - yaw_dev)
+        offset = nan.copy()
+        for b in np.unique(bout):
+            idx = np.flatnonzero(bout == b)
+            w = np.where(vote[idx], self.direction_quality_[idx], 0.0)
+            offset[idx] = circular_smooth(raw_offset[idx], w, self.offset_window_steps // 2)
+        if np.isnan(offset).all():
+            warnings.warn("heading: no step gave a walking direction; device yaw used as heading", stacklevel=2)
+            offset[:] = 0.0
+        else:  # bouts without a usable direction take the nearest known offset
+            known = np.flatnonzero(np.isfinite(offset))
+            nearest = known[np.clip(np.searchsorted(known, np.arange(n)), 0, len(known) - 1)]
+            offset = np.where(np.isfinite(offset), offset, offset[nearest])
+        self.offset_rad_ = offset
+        heading_unwrapped = yaw_dev + np.unwrap(offset)
+        self.heading_rad_ = wrap(heading_unwrapped)
+        change = np.diff(heading_unwrapped, prepend=heading_unwrapped[0])
+        self.heading_change_rad_ = change
+        dt = np.diff(t, prepend=t[0])
+        bias_sigma = attitude.bias_sigma_radps[i_hi]
+        self.heading_change_std_rad_ = np.sqrt((bias_sigma * dt) ** 2 + self.gyro_arw_rad_per_sqrt_s ** 2 * dt
+                                               + self.step_direction_std_rad ** 2)
+        if attitude.q9_wxyz is not None and u.mag_ut is not None:
+            self._mag_heading(u, attitude, i_hi)
+        return self
+
+    def _mag_heading(self, u: UniformImu, attitude: Attitude, i_step: np.ndarray) -> None:
+        """Absolute heading: the step heading turned by the 9D-vs-6D yaw of VQF, where the field looks undisturbed."""
+        rel = quat_mul(attitude.q9_wxyz, attitude.q_wxyz * np.array([1.0, -1.0, -1.0, -1.0]))
+        delta = 2.0 * np.arctan2(rel[:, 3], rel[:, 0])
+        up = np.column_stack([np.zeros(len(u)), np.zeros(len(u)), np.ones(len(u))])
+        conj6 = attitude.q_wxyz * np.array([1.0, -1.0, -1.0, -1.0])
+        up_s = rotate(conj6, up)
+        norm = np.linalg.norm(u.mag_ut, axis=1)
+        dip = np.arcsin(np.clip(-(u.mag_ut * up_s).sum(axis=1) / np.maximum(norm, 1e-9), -1, 1))
+        base = ~attitude.mag_disturbed
+        if not base.any():
+            return
+        med_norm, med_dip = np.median(norm[base]), np.median(dip[base])
+        trusted = base & (np.abs(norm / med_norm - 1.0) <= self.mag_norm_tolerance) & (np.abs(dip - med_dip) <= self.mag_dip_tolerance_rad)
+        ok = trusted[i_step]
+        self.mag_heading_rad_ = np.where(ok, wrap(self.heading_rad_ + delta[i_step]), np.nan)
+        self.mag_heading_std_rad_ = np.where(ok, self.mag_heading_std_rad, np.nan)

@@ -1,0 +1,68 @@
+"""``pdr steps``: the steps table of INTERFACES.md from a recording (detection, features, heading)."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pandas as pd
+
+from pdr.errors import InputError
+from pdr.heading import AttitudeStepHeading
+from pdr.io.recording import Recording
+from pdr.signals import estimate_attitude, uniform_imu
+from pdr.steps import PeakStepDetection, WaveletStepDetection, acc_norm_signal, step_features
+
+STEPS_COLUMNS = [
+    "t_s", "bout_id", "step_duration_s", "step_freq_hz", "step_freq_fft_hz", "acc_var_m2ps4", "slope_rad",
+    "heading_rad", "heading_change_rad", "heading_change_std_rad", "mag_heading_rad", "mag_heading_std_rad",
+]
+DETECTORS = {"wavelet": WaveletStepDetection, "peak": PeakStepDetection}
+LOW_RATE_HZ = 25.0  # below this, contact times are coarse (1/rate) and impacts are smoothed away
+
+
+def empty_steps_table() -> pd.DataFrame:
+    return pd.DataFrame({c: pd.Series(dtype=int if c == "bout_id" else float) for c in STEPS_COLUMNS})
+
+
+def make_detector(section: dict | None):
+    """The ``[steps]`` section: ``method = "wavelet" | "peak"`` (default wavelet) plus that detector's parameters."""
+    section = dict(section or {})
+    method = section.pop("method", "wavelet")
+    if method not in DETECTORS:
+        raise InputError(f"configuration [steps]: expected method one of {', '.join(DETECTORS)}, found {method!r}")
+    return DETECTORS[method].from_config(section)
+
+
+def detect_steps(rec: Recording, config: dict) -> pd.DataFrame:
+    """Detect the steps of ``rec``'s main IMU and return the steps table (one row per step, sorted by ``t_s``).
+
+    Config sections: ``[steps]`` (detector parameters, ``method``), ``[heading]`` (:class:`AttitudeStepHeading`).
+    A recording with no walking gives an empty, correctly typed table and a warning.
+    """
+    if not isinstance(config, dict):
+        raise InputError(f"configuration: expected a dict of sections, found {type(config).__name__}")
+    detector = make_detector(config.get("steps"))
+    heading = AttitudeStepHeading.from_config(config.get("heading"))
+    u = uniform_imu(rec.imu)
+    if u.rate_hz < LOW_RATE_HZ:
+        warnings.warn(f"{rec.id}: sampling rate {u.rate_hz:.1f} Hz is low (< {LOW_RATE_HZ:g} Hz): contact times are "
+                      f"only good to about {1e3 / u.rate_hz:.0f} ms", stacklevel=2)
+    detector.detect(u)
+    steps = detector.steps_.sort_values("t_s", kind="stable").reset_index(drop=True)
+    if len(steps) == 0:
+        warnings.warn(f"{rec.id}: no walking found, no steps", stacklevel=2)
+        return empty_steps_table()
+    if len(steps) == 1:
+        warnings.warn(f"{rec.id}: only one step found", stacklevel=2)
+    feats = step_features(steps, u, acc_norm_signal(u), gnss=rec.gnss)
+    att = estimate_attitude(u)
+    heading.estimate(u, att, steps)
+    table = pd.concat([steps[["t_s", "bout_id"]], feats], axis=1)
+    table["heading_rad"] = heading.heading_rad_
+    table["heading_change_rad"] = heading.heading_change_rad_
+    table["heading_change_std_rad"] = heading.heading_change_std_rad_
+    table["mag_heading_rad"] = heading.mag_heading_rad_
+    table["mag_heading_std_rad"] = heading.mag_heading_std_rad_
+    table["bout_id"] = table["bout_id"].astype(int)
+    return table

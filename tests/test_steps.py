@@ -1,0 +1,230 @@
+"""Step detection, walking bouts, per-step features and ``pdr steps`` (the steps table of INTERFACES.md)."""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from pdr.cli.main import main
+from pdr.constants import GRAVITY_MPS2
+from pdr.errors import InputError
+from pdr.io.recording import Recording, save_recording
+from pdr.pipelines.steps import STEPS_COLUMNS, detect_steps
+from pdr.steps import PeakStepDetection, WaveletStepDetection
+from pdr.steps.features import fft_frequency, spacing_frequency, step_durations, step_variance
+from pdr.steps.gait import step_period_from_acf, window_acf
+
+SHARED = Path(__file__).resolve().parents[1] / ".." / "shared" / "datasets"
+
+
+def rotation(rx: float, ry: float, rz: float) -> np.ndarray:
+    cx, sx, cy, sy, cz, sz = np.cos(rx), np.sin(rx), np.cos(ry), np.sin(ry), np.cos(rz), np.sin(rz)
+    return (np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]]) @ np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
+            @ np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]]))
+
+
+def walk_imu(*, walk_s: float = 20.0, rest_before_s: float = 5.0, rest_after_s: float = 5.0, rate_hz: float = 100.0,
+             step_hz: float = 1.8, stride_weight: float = 0.0, euler: tuple = (0.0, 0.0, 0.0), seed: int = 0,
+             t0_s: float = 0.0) -> tuple[pd.DataFrame, np.ndarray]:
+    """A walk with jittered contacts: per contact a heel impact and a sole peak (two Gaussians), a smooth trunk
+    oscillation, optional stride-periodic swing (thigh/arm placements), noise, the sensor in any orientation.
+    Richer than the detector's model (one sinusoidal detail band). Returns (imu table, true contact times)."""
+    rng = np.random.default_rng(seed)
+    total = rest_before_s + walk_s + rest_after_s
+    t = np.arange(0.0, total, 1.0 / rate_hz)
+    n_steps = int(walk_s * step_hz)
+    periods = (1.0 / step_hz) * (1 + 0.03 * rng.standard_normal(max(n_steps, 1)))
+    contacts = (rest_before_s + np.cumsum(periods) - periods[0])[:n_steps]
+    contacts = contacts[contacts < rest_before_s + walk_s]
+    vert = np.zeros_like(t)
+    fwd = np.zeros_like(t)
+    for k, c in enumerate(contacts):
+        amp = 1.0 + 0.1 * rng.standard_normal()
+        vert += amp * (4.0 * np.exp(-0.5 * ((t - c - 0.02) / 0.03) ** 2) + 2.0 * np.exp(-0.5 * ((t - c - 0.12) / 0.05) ** 2))
+        fwd += amp * 1.5 * np.exp(-0.5 * ((t - c + 0.08) / 0.06) ** 2) - amp * 1.5 * np.exp(-0.5 * ((t - c - 0.1) / 0.06) ** 2)
+    walking = (t >= rest_before_s) & (t < rest_before_s + walk_s)
+    vert += stride_weight * np.sin(np.pi * step_hz * (t - rest_before_s) + 0.7) * walking  # the leg's own swing
+    vert -= (vert[walking].mean() if walking.any() else 0.0) * walking
+    lateral = 0.8 * np.sin(np.pi * step_hz * (t - rest_before_s)) * walking
+    acc_w = np.column_stack([fwd, lateral, GRAVITY_MPS2 + vert]) + 0.15 * rng.standard_normal((len(t), 3))
+    acc = acc_w @ rotation(*euler)  # world -> sensor: a_s = R^T a_w
+    imu = pd.DataFrame({"t_s": t + t0_s, "acc_x_mps2": acc[:, 0], "acc_y_mps2": acc[:, 1], "acc_z_mps2": acc[:, 2]})
+    return imu, contacts + t0_s
+
+
+def match(det: np.ndarray, ref: np.ndarray, tol_s: float = 0.25) -> tuple[int, int, int]:
+    """(true positives, false positives, false negatives), one-to-one within ``tol_s``."""
+    used = np.zeros(len(det), bool)
+    tp = 0
+    for r in ref:
+        c = np.flatnonzero(~used & (np.abs(det - r) <= tol_s))
+        if len(c):
+            used[c[np.argmin(np.abs(det[c] - r))]] = True
+            tp += 1
+    return tp, int((~used).sum()), len(ref) - tp
+
+
+def rec_of(imu: pd.DataFrame, placement: str = "waist") -> Recording:
+    return Recording(meta={"recording": {"id": "t", "placement": placement}}, imu=imu)
+
+
+# --- gait period -----------------------------------------------------------------------------------------------
+
+def test_step_period_from_acf_step_and_stride_periodic():
+    rate = 100.0
+    t = np.arange(0, 8, 1 / rate)
+    step = np.sin(2 * np.pi * 1.8 * t)  # trunk: every step alike
+    stride = np.sin(2 * np.pi * 0.9 * t) + 0.2 * np.sin(2 * np.pi * 1.8 * t + 1.0)  # thigh: its own side dominates
+    for x in (step, stride):
+        _, acf, _ = window_acf(x, len(x), len(x), 250)
+        p, strength = step_period_from_acf(acf[0], rate, 1 / 3.5, 1.0)
+        assert p == pytest.approx(1 / 1.8, rel=0.05)
+        assert strength > 0.5
+
+
+# --- wavelet detector ------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("step_hz", [1.3, 1.8, 2.4])
+@pytest.mark.parametrize("stride_weight", [0.0, 1.0])
+def test_wavelet_counts_and_times(step_hz, stride_weight):
+    imu, truth = walk_imu(step_hz=step_hz, stride_weight=stride_weight, euler=(0.4, -1.1, 2.0), seed=int(step_hz * 10))
+    det = WaveletStepDetection().detect(imu)
+    tp, fp, fn = match(det.steps_.t_s.to_numpy(), truth, tol_s=0.1)
+    assert fp + fn <= 2, (tp, fp, fn)
+    assert (det.steps_.t_s > 4.0).all() and (det.steps_.t_s < 26.0).all()  # nothing while standing
+
+
+def test_wavelet_no_walking_standing_and_handling():
+    rng = np.random.default_rng(3)
+    t = np.arange(0, 30, 0.01)
+    acc = np.column_stack([np.zeros_like(t), np.zeros_like(t), np.full_like(t, GRAVITY_MPS2)])
+    acc += 0.05 * rng.standard_normal(acc.shape)
+    acc[1000:1500] += np.cumsum(rng.standard_normal((500, 3)), axis=0) * 0.3  # handling the phone: aperiodic
+    imu = pd.DataFrame({"t_s": t, "acc_x_mps2": acc[:, 0], "acc_y_mps2": acc[:, 1], "acc_z_mps2": acc[:, 2]})
+    det = WaveletStepDetection().detect(imu)
+    assert len(det.steps_) == 0 and list(det.steps_.columns) == ["t_s", "bout_id"]
+
+
+def test_wavelet_stop_rule_splits_bouts():
+    a, ta = walk_imu(walk_s=15, rest_after_s=0.0, seed=1)
+    b, tb = walk_imu(walk_s=15, rest_before_s=4.0, seed=2, t0_s=a.t_s.iloc[-1] + 0.01)
+    det = WaveletStepDetection().detect(pd.concat([a, b], ignore_index=True))
+    assert det.steps_.bout_id.nunique() == 2
+    tp, fp, fn = match(det.steps_.t_s.to_numpy(), np.concatenate([ta, tb]), 0.1)
+    assert fp + fn <= 3
+
+
+def test_wavelet_rejects_bad_params():
+    imu, _ = walk_imu(walk_s=10)
+    with pytest.raises(InputError, match="min_step_freq_hz"):
+        WaveletStepDetection(min_step_freq_hz=4.0).detect(imu)
+    with pytest.raises(InputError, match="level"):
+        WaveletStepDetection(level=0).detect(imu)
+
+
+@settings(max_examples=8, deadline=None)
+@given(shift=st.floats(-1000.0, 1000.0), rx=st.floats(-3.1, 3.1), ry=st.floats(-1.5, 1.5), rz=st.floats(-3.1, 3.1))
+def test_wavelet_time_shift_and_rotation_invariance(shift, rx, ry, rz):
+    base, _ = walk_imu(walk_s=12, rest_before_s=3, rest_after_s=3, seed=7)
+    ref = WaveletStepDetection().detect(base).steps_.t_s.to_numpy()
+    moved, _ = walk_imu(walk_s=12, rest_before_s=3, rest_after_s=3, seed=7, euler=(rx, ry, rz), t0_s=shift)
+    got = WaveletStepDetection().detect(moved).steps_.t_s.to_numpy() - shift
+    assert len(got) == len(ref)
+    assert np.max(np.abs(got - ref)) < 0.02
+
+
+# --- peak baseline ---------------------------------------------------------------------------------------------
+
+def test_peak_baseline_counts():
+    imu, truth = walk_imu(step_hz=1.8, seed=4)
+    det = PeakStepDetection().detect(imu)
+    tp, fp, fn = match(det.steps_.t_s.to_numpy(), truth, 0.15)
+    assert fp + fn <= 3
+
+
+# --- features --------------------------------------------------------------------------------------------------
+
+def test_features_exact_on_regular_steps():
+    t = np.arange(10) * 0.5 + 1.0
+    b = np.array([0] * 5 + [1] * 5)
+    d = step_durations(t, b)
+    assert np.isnan(d[0]) and np.isnan(d[5]) and np.allclose(d[[1, 2, 3, 4, 6]], 0.5)
+    assert np.allclose(spacing_frequency(t, b), 2.0)
+    rate = 100.0
+    tt = np.arange(0, 8, 1 / rate)
+    x = 2.0 * np.sin(2 * np.pi * 2.0 * tt)
+    f = fft_frequency(x, rate, 0.0, np.array([4.0]), np.array([1.8]))
+    assert f[0] == pytest.approx(2.0, abs=0.03)
+    v = step_variance(x, rate, 0.0, np.array([4.0, 4.5]), np.array([0.5, 0.5]))
+    assert np.allclose(v, 2.0, rtol=0.05)  # variance of a sine of amplitude 2 over a whole period
+
+
+def test_slope_from_barometer():
+    imu, _ = walk_imu(walk_s=30, rest_before_s=2, rest_after_s=2, seed=5)
+    # climbing 0.1 m per second: 0.1 / (1.8 steps/s * 0.7 m) -> about 4.5 degrees with the nominal step length
+    alt = 0.1 * imu.t_s.to_numpy()
+    imu["baro_hpa"] = 1013.25 * (1 - alt / 44330.0) ** 5.255
+    table = detect_steps(rec_of(imu), {})
+    mid = table.slope_rad.dropna().to_numpy()
+    assert len(mid) > 20 and np.median(mid) == pytest.approx(np.arctan2(0.1, 1.8 * 0.7), rel=0.1)
+
+
+# --- pipeline: bad input ---------------------------------------------------------------------------------------
+
+def test_pipeline_columns_and_no_walking():
+    imu, _ = walk_imu(walk_s=0.0, rest_before_s=20.0, rest_after_s=0.0)
+    with pytest.warns(UserWarning, match="no walking"):
+        table = detect_steps(rec_of(imu), {})
+    assert list(table.columns) == STEPS_COLUMNS and len(table) == 0
+
+
+def test_pipeline_gap_of_minutes_and_low_rate():
+    a, ta = walk_imu(walk_s=15, rest_after_s=0.0, seed=1)
+    b, tb = walk_imu(walk_s=15, rest_before_s=0.0, seed=2, t0_s=a.t_s.iloc[-1] + 180.0)
+    with pytest.warns(UserWarning, match="gap"):
+        table = detect_steps(rec_of(pd.concat([a, b], ignore_index=True)), {})
+    assert not ((table.t_s > a.t_s.iloc[-1]) & (table.t_s < b.t_s.iloc[0])).any()
+    tp, fp, fn = match(table.t_s.to_numpy(), np.concatenate([ta, tb]), 0.15)
+    assert fp + fn <= 4
+    low, truth = walk_imu(rate_hz=20.0, seed=3)
+    with pytest.warns(UserWarning, match="low"):
+        table = detect_steps(rec_of(low), {})
+    tp, fp, fn = match(table.t_s.to_numpy(), truth, 0.15)
+    assert fp + fn <= 2
+
+
+def test_pipeline_one_step_and_bad_config():
+    imu, _ = walk_imu(walk_s=0.6, step_hz=1.8)
+    with warnings.catch_warnings(record=True):
+        warnings.simplefilter("always")
+        table = detect_steps(rec_of(imu), {})
+    assert list(table.columns) == STEPS_COLUMNS and len(table) <= 1
+    with pytest.raises(InputError, match="unknown parameter"):
+        detect_steps(rec_of(imu), {"steps": {"level_typo": 3}})
+    with pytest.raises(InputError, match="method"):
+        detect_steps(rec_of(imu), {"steps": {"method": "magic"}})
+
+
+def test_pipeline_peak_method():
+    imu, truth = walk_imu(seed=9)
+    table = detect_steps(rec_of(imu), {"steps": {"method": "peak"}})
+    assert list(table.columns) == STEPS_COLUMNS and abs(len(table) - len(truth)) <= 3
+
+
+# --- CLI -------------------------------------------------------------------------------------------------------
+
+def test_cli_steps_smoke(tmp_path, capsys):
+    imu, truth = walk_imu(seed=11)
+    rec = save_recording(rec_of(imu), tmp_path / "rec")
+    out = tmp_path / "steps.csv"
+    assert main(["steps", str(rec), "-o", str(out)]) == 0
+    table = pd.read_csv(out)
+    assert list(table.columns) == STEPS_COLUMNS
+    assert abs(len(table) - len(truth)) <= 2
+    assert f"{len(table)} steps" in capsys.readouterr().out
