@@ -44,8 +44,16 @@ def require_dir(path: Path, what: str) -> Path:
 
 
 def read_table(path: Path, what: str, **kwargs) -> pd.DataFrame:
-    """``pd.read_csv`` whose failures (parse errors, bad encoding, empty file) become one-line InputErrors."""
+    """``pd.read_csv`` whose failures (parse errors, bad encoding, empty file) become one-line InputErrors.
+
+    A file whose last line has no line break is taken as truncated (a cut inside the last number is otherwise
+    invisible); every source format handled here ends its lines with one."""
     require_file(path, what)
+    with open(path, "rb") as f:
+        f.seek(-1, 2)
+        if f.read(1) not in (b"\n", b"\r"):
+            raise InputError(f"{what}: expected {path.name} to end with a line break, found its last line cut off "
+                             "(a truncated file? if it is complete, add a line break at its end)")
     try:
         df = pd.read_csv(path, **kwargs)
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError, ValueError, IndexError) as exc:

@@ -11,19 +11,17 @@ import numpy as np
 import pandas as pd
 
 from pdr.errors import InputError
-from pdr.io.importers._common import imu_frame, increasing_mask, interp_columns, steady_clock
+from pdr.io.importers._common import imu_frame, increasing_mask, interp_columns, require_finite, steady_clock
 
 Series = tuple[np.ndarray, np.ndarray]  # (t_s increasing, values (N, k))
 MIN_OVERLAP_S = 0.5
 
 
 def clean_series(t: np.ndarray, values: np.ndarray, what: str) -> Series:
-    """Finite rows only (NaN rows dropped with a warning), then strictly increasing time (repairs warned)."""
+    """Finite values required (an empty cell means a damaged or truncated file), then strictly increasing time:
+    repeated or back-stepping samples are dropped with a warning."""
     values = np.asarray(values, float).reshape(len(t), -1)
-    ok = np.isfinite(t) & np.isfinite(values).all(axis=1)
-    if not ok.all():
-        warnings.warn(f"{what}: dropped {int((~ok).sum())} row(s) with empty or non-finite values", stacklevel=3)
-    t, values = t[ok], values[ok]
+    require_finite(np.column_stack([t, values]), what, "time and values")
     keep = increasing_mask(t, what)
     return t[keep], values[keep]
 

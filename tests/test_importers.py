@@ -1,0 +1,493 @@
+"""Importers of ``pdr import``: the real data in ``datasets/`` (units, clocks, reference truth), hand-written
+Sensor Logger / phyphox / GPX files in ``tests/importers/``, hostile archives and bad input through the CLI."""
+
+from __future__ import annotations
+
+import shutil
+import stat
+import warnings
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from pdr.cli.main import main
+from pdr.constants import GRAVITY_MPS2
+from pdr.errors import InputError
+from pdr.io.importers import import_recordings
+from pdr.io.importers import _common
+from pdr.io.recording import load_recording
+
+ROOT = Path(__file__).resolve().parents[1]
+DATASETS = ROOT / "datasets"
+HAND = Path(__file__).resolve().parent / "importers"
+OXFORD = DATASETS / "oxford_step_counter"
+MOBGAP = DATASETS / "mobgap_lowerback_tvs_lab" / "lab" / "HA"
+HUMOLIRE = DATASETS / "humolire_phone_landmarks" / "data" / "imus" / "1" / "square_2x"
+GAITMAP = DATASETS / "gaitmap_foot_imu_mocap"
+XIO = DATASETS / "xio_foot_imu_loop_walk" / "short_walk.csv"
+
+
+def _import(fmt, src, dest, **kw):
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        paths = import_recordings(fmt, Path(src), Path(dest), **kw)
+    return paths, [str(w.message) for w in caught]
+
+
+def _median_acc(rec) -> float:
+    return float(np.median(np.linalg.norm(rec.imu[["acc_x_mps2", "acc_y_mps2", "acc_z_mps2"]].to_numpy(), axis=1)))
+
+
+def _cli(argv, capsys):
+    rc = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return rc, out, err
+
+
+def _assert_one_error(rc, err):
+    lines = [line for line in err.splitlines() if line.strip()]
+    errors = [line for line in lines if line.startswith("error:")]
+    assert rc == 1 and len(errors) == 1, err
+    assert not any("Traceback" in line for line in lines)
+
+
+def _entries(folder: Path) -> list[str]:
+    return sorted(p.name for p in folder.iterdir()) if folder.exists() else []
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Real data
+# ---------------------------------------------------------------------------------------------------------------
+
+OXFORD_TRUTH = {"armband": 335, "backpocket": 343, "bag": 346, "frontpocket": 327, "hand": 326, "neckpouch": 346}
+OXFORD_PLACEMENT = {"armband": "arm", "backpocket": "pocket", "bag": "bag", "frontpocket": "pocket", "hand": "hand",
+                    "neckpouch": "neck"}
+
+
+@pytest.fixture(scope="module")
+def oxford_validation(tmp_path_factory):
+    dest = tmp_path_factory.mktemp("oxford")
+    paths, messages = _import("oxford", OXFORD / "validation", dest)
+    return paths, messages
+
+
+def test_oxford_validation_truth_and_units(oxford_validation):
+    paths, messages = oxford_validation
+    assert sorted(p.name for p in paths) == sorted(f"user1_{k}" for k in OXFORD_TRUTH)
+    for path in paths:
+        rec = load_recording(path)
+        position = path.name.split("_", 1)[1]
+        summary = rec.reference["summary"]
+        assert summary["n_steps"] == OXFORD_TRUTH[position]
+        assert len(rec.reference["steps"]) == OXFORD_TRUTH[position]
+        assert summary["n_steps_app"] > 0
+        assert rec.placement == OXFORD_PLACEMENT[position]
+        assert 9.0 < _median_acc(rec) < 11.0
+        assert abs(rec.sample_rate_hz - 100.0) < 1.0
+        steps = rec.reference["steps"]["t_s"].to_numpy()
+        assert rec.imu["t_s"].iloc[0] == 0.0 and 0 <= steps[0] and steps[-1] <= rec.imu["t_s"].iloc[-1] + 1e-9
+        assert np.all(np.diff(steps) >= 0) and 150 < rec.imu["t_s"].iloc[-1] < 210
+        assert rec.meta["recording"]["source"] == "oxford" and rec.meta["recording"]["start_unix_s"] > 1.5e9
+    assert any("leading all-zero row" in m for m in messages)  # user1_hand starts with a zero row
+    assert any("repeats or steps back" in m for m in messages)  # armband and neckpouch repeat a time stamp
+
+
+def test_oxford_optimisation_irregular_clock_passes(tmp_path):
+    paths, _ = _import("oxford", OXFORD / "optimisation" / "data" / "Samsung_Carmelo_Hard_Purse_1", tmp_path)
+    rec = load_recording(paths[0])
+    assert rec.id == "Samsung_Carmelo_Hard_Purse_1" and rec.placement == "bag"
+    assert rec.reference["summary"]["n_steps"] == 288 == len(rec.reference["steps"])
+    dt = np.diff(rec.imu["t_s"].to_numpy())
+    q25, q75 = np.percentile(dt, [25, 75])
+    assert 1.0 < q75 / q25 < 4.0  # irregular (~204 Hz) but kept as recorded: the validator accepts it
+    assert len(rec.imu) == 35236
+
+
+@pytest.fixture(scope="module")
+def mobgap_recs(tmp_path_factory):
+    dest = tmp_path_factory.mktemp("mobgap")
+    out = {}
+    for participant in ("001", "002"):
+        paths, messages = _import("mobgap", MOBGAP / participant, dest / participant)
+        out[participant] = ({p.name: load_recording(p) for p in paths}, messages)
+    return out
+
+
+@pytest.mark.parametrize("participant, trial, n_ic, distance_m, system", [
+    ("001", "Test5_Trial1", 9, 5.0, "INDIP"), ("001", "Test5_Trial2", 9, 4.8, "INDIP"),
+    ("001", "Test11_Trial1", 63, 23.4, "INDIP"), ("002", "Test5_Trial2", 6, 4.1, "Stereophoto"),
+    ("002", "Test11_Trial1", 54, 12.8, "INDIP"),
+])
+def test_mobgap_reference_matches_readme(mobgap_recs, participant, trial, n_ic, distance_m, system):
+    rec = mobgap_recs[participant][0][trial]
+    summary = rec.reference["summary"]
+    assert summary["reference_system"] == system
+    assert summary["n_steps"] == n_ic
+    assert abs(summary["distance_m"] - distance_m) < 0.06
+    steps = rec.reference["steps"]
+    assert len(steps) == summary["n_steps_timed"] <= n_ic
+    assert set(steps["foot"]) <= {"left", "right"}
+    strides = rec.reference["strides"]
+    assert len(strides) > 0 and (strides["t_end_s"] > strides["t_start_s"]).all()
+    assert strides["length_m"].between(0.05, 2.0).all() and set(strides["foot"]) <= {"left", "right"}
+    # stride start instants are initial contacts of the same foot (INDIP samples / 100 Hz -> s)
+    for _, row in strides.iterrows():
+        match = steps[np.isclose(steps["t_s"], row["t_start_s"], atol=0.011)]
+        assert len(match) and row["foot"] in set(match["foot"])
+    assert 9.4 < _median_acc(rec) < 10.1  # g -> m/s²
+    assert rec.imu[["gyr_x_radps", "gyr_y_radps", "gyr_z_radps"]].abs().max().max() < 6.0  # deg/s -> rad/s
+    assert rec.placement == "waist" and "baro_hpa" in rec.imu and "mag_x_ut" in rec.imu
+
+
+def test_mobgap_turns_subject_and_missing_reference(mobgap_recs):
+    recs, messages = mobgap_recs["001"]
+    turns = recs["Test11_Trial1"].reference["summary"]["turn_angles_deg"]
+    np.testing.assert_allclose(turns, [-56, 90, -133, 88, -80, 46, -50], atol=1.0)
+    assert recs["Test5_Trial1"].subject == {"height_m": 1.59, "mass_kg": 73.0, "sensor_height_m": 0.964, "foot_length_m": 0.25}
+    bouts = pd.read_csv(recs["Test11_Trial1"].path / "reference" / "bouts.csv")
+    assert len(bouts) == 6 and bouts["n_initial_contacts"].sum() == 63
+    recs2, messages2 = mobgap_recs["002"]
+    np.testing.assert_allclose(recs2["Test11_Trial1"].reference["summary"]["turn_angles_deg"], [-135, -147, 149], atol=1.0)
+    assert recs2["Test11_Trial1"].subject["sensor_height_m"] == 1.08
+    assert recs2["Test5_Trial1"].reference == {}  # neither INDIP nor Stereophoto has a bout
+    assert any("no walking bout" in m for m in messages2)
+    # StartDateTime 2020-08-21T12:50:00.388+02:00
+    assert abs(recs2["Test11_Trial1"].meta["recording"]["start_unix_s"] - 1598007000.388) < 1.0
+
+
+def test_humolire_landmarks_and_common_clock(tmp_path):
+    paths, _ = _import("humolire", HUMOLIRE, tmp_path)
+    rec = load_recording(paths[0])
+    assert rec.id == "square_2x" and rec.placement == "hand" and rec.subject == {"height_m": 1.86}
+    assert abs(rec.sample_rate_hz - 200.0) < 1e-6
+    dt = np.diff(rec.imu["t_s"].to_numpy())
+    assert np.allclose(dt, 0.005, atol=2e-6)
+    assert 9.4 < _median_acc(rec) < 10.2
+    marks = rec.reference["landmarks"]
+    assert len(marks) == 8
+    np.testing.assert_allclose(marks["t_s"].iloc[[0, -1]], [10.546, 80.799])
+    np.testing.assert_allclose(marks[["e_m", "n_m"]].iloc[0], [23.191, 6.481])
+    summary = rec.reference["summary"]
+    assert abs(summary["distance_m"] - 120.8) < 0.1 and summary["loop_closure"] is True
+    traj = rec.reference["trajectory"]
+    assert len(traj) == 9 and np.allclose(traj[["e_m", "n_m"]].iloc[0], [7.147, 6.154])
+    assert rec.imu["t_s"].iloc[0] < 0.2 and 80.9 < rec.imu["t_s"].iloc[-1] < 81.4
+
+
+def test_humolire_box_average_matches_mean_of_raw_samples(tmp_path):
+    """The 200 Hz sample at t is the time-weighted mean of the raw samples within t +- 2.5 ms (checked on raw data)."""
+    paths, _ = _import("humolire", HUMOLIRE, tmp_path)
+    rec = load_recording(paths[0])
+    raw = pd.read_csv(HUMOLIRE / "accelerometer-calibrated.txt", sep=r"\s+", skiprows=5)
+    t_raw, z_raw = raw["elapsed-time-sensor"].to_numpy(), raw["z"].to_numpy()
+    for k in (1000, 8000, 15000):
+        t = rec.imu["t_s"].iloc[k]
+        fine = np.linspace(t - 0.0025, t + 0.0025, 2001)
+        expected = np.trapezoid(np.interp(fine, t_raw, z_raw), fine) / 0.005
+        assert abs(rec.imu["acc_z_mps2"].iloc[k] - expected) < 1e-4
+
+
+@pytest.fixture(scope="module")
+def gaitmap_recs(tmp_path_factory):
+    dest = tmp_path_factory.mktemp("gaitmap")
+    paths, messages = _import("gaitmap", GAITMAP, dest)
+    return {p.name: load_recording(p) for p in paths}, messages
+
+
+def test_gaitmap_strides_and_feet(gaitmap_recs):
+    recs, messages = gaitmap_recs
+    assert sorted(recs) == ["stairs_down", "stairs_up", "walk_2x20m"]
+    assert any("--rate-hz was not given" in m for m in messages)
+    walk = recs["walk_2x20m"]
+    assert walk.placement == "foot_left" and list(walk.extra_imus) == ["foot_right"]
+    assert abs(walk.sample_rate_hz - 204.8) < 1e-3
+    strides = walk.reference["strides"]
+    assert len(strides) == 57 and (strides["foot"] == "left").sum() == 28 and (strides["foot"] == "right").sum() == 29
+    lengths = np.sort(strides["length_m"].to_numpy())
+    assert np.all(lengths[:2] < 0.7)  # the two strides of the 180° turn: 0.47 m and 0.62 m
+    straight = lengths[(lengths > 1.25)]
+    assert len(straight) >= 50 and straight.min() > 1.28 and straight.max() < 1.47
+    steps = walk.reference["steps"]
+    assert set(steps["foot"]) == {"left", "right"} and np.all(np.diff(steps["t_s"]) >= 0)
+    assert walk.reference["summary"]["n_strides"] == 57
+    for rec in recs.values():
+        assert 8.0 < _median_acc(rec) < 11.5
+        for imu in rec.imus_by_placement().values():
+            assert imu[["gyr_x_radps", "gyr_y_radps", "gyr_z_radps"]].abs().max().max() < 40  # deg/s -> rad/s
+    assert recs["stairs_up"].reference["summary"]["activity"] == "stairs_up"
+    assert abs(recs["stairs_down"].sample_rate_hz - 204.8) < 1e-3
+
+
+def test_gaitmap_rate_hz_sets_the_clock(tmp_path):
+    paths, messages = _import("gaitmap", GAITMAP / "imu_sample.csv", tmp_path, rate_hz=102.4)
+    rec = load_recording(paths[0])
+    assert abs(rec.sample_rate_hz - 102.4) < 1e-3 and not any("--rate-hz" in m for m in messages)
+    assert abs(rec.reference["strides"]["t_start_s"].min() - 371 / 102.4) < 1e-6
+
+
+def test_xio_repaired_clock_units_and_loop(tmp_path):
+    paths, messages = _import("xio", XIO, tmp_path)
+    rec = load_recording(paths[0])
+    assert rec.id == "short_walk" and rec.placement == "foot_right"
+    assert any("dropped 205 sample(s)" in m for m in messages)
+    assert len(rec.imu) == 16539 - 205 and np.all(np.diff(rec.imu["t_s"]) > 0)
+    assert 9.5 < _median_acc(rec) < 10.1
+    np.testing.assert_allclose(rec.imu[["acc_x_mps2", "acc_y_mps2", "acc_z_mps2"]].iloc[0],
+                               np.array([-0.4937814, 0.2420433, 0.8312204]) * GRAVITY_MPS2, rtol=1e-7)
+    np.testing.assert_allclose(rec.imu["gyr_x_radps"].iloc[0], np.radians(-0.1428319), rtol=1e-7)
+    summary = rec.reference["summary"]
+    assert summary["loop_closure"] is True and summary["distance_m"] == 25.0 and summary["distance_approximate"] is True
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Hand-written app exports
+# ---------------------------------------------------------------------------------------------------------------
+
+
+def _zip_folder(folder: Path, zip_path: Path, prefix: str = "") -> Path:
+    with zipfile.ZipFile(zip_path, "w", zipfile.ZIP_DEFLATED) as zf:
+        for p in sorted(folder.rglob("*")):
+            if p.is_file():
+                zf.write(p, prefix + p.relative_to(folder).as_posix())
+    return zip_path
+
+
+def test_sensorlogger_android_folder_and_zip(tmp_path):
+    src = HAND / "sensorlogger_android"
+    rec = load_recording(_import("sensorlogger", src, tmp_path / "a")[0][0])
+    total = pd.read_csv(src / "TotalAcceleration.csv")
+    gyr = pd.read_csv(src / "Gyroscope.csv")
+    t_acc = (total["time"] - total["time"].iloc[0]).to_numpy() / 1e9
+    assert rec.meta["recording"]["start_unix_s"] == total["time"].iloc[0] / 1e9
+    # acc = TotalAcceleration (columns are z, y, x in the file), gyro interpolated onto the accelerometer clock
+    k = 10
+    row = rec.imu.iloc[k]
+    j = int(np.flatnonzero(np.isclose(t_acc, row["t_s"]))[0])
+    np.testing.assert_allclose(row[["acc_x_mps2", "acc_z_mps2"]], total[["x", "z"]].iloc[j], rtol=1e-7)
+    t_gyr = (gyr["time"] - total["time"].iloc[0]).to_numpy() / 1e9
+    np.testing.assert_allclose(row["gyr_x_radps"], np.interp(row["t_s"], t_gyr, gyr["x"]), rtol=1e-6)
+    assert rec.imu["mag_z_ut"].iloc[0] == -40.0 and 1013.2 < rec.imu["baro_hpa"].iloc[0] < 1013.3
+    gnss = rec.gnss
+    assert len(gnss) == 3 and np.isnan(gnss["h_acc_m"].iloc[1]) and gnss["h_acc_m"].iloc[0] == 8.0
+    np.testing.assert_allclose(gnss["t_s"], [0.3, 1.3, 1.9])
+    assert rec.geo_origin == (50.78, 7.59)
+    zipped = load_recording(_import("sensorlogger", _zip_folder(src, tmp_path / "export.zip", "2024-06-01_10-00-00/"),
+                                    tmp_path / "b")[0][0])
+    assert zipped.id == "export"
+    pd.testing.assert_frame_equal(zipped.imu, rec.imu)
+
+
+def test_sensorlogger_ios_gravity_added_and_sign_flipped(tmp_path):
+    paths, messages = _import("sensorlogger", HAND / "sensorlogger_ios", tmp_path)
+    rec = load_recording(paths[0])
+    assert any("iOS" in m for m in messages)
+    assert 9.5 < np.median(rec.imu["acc_z_mps2"]) < 10.5  # +z up when flat, gravity added back
+    android = load_recording(_import("sensorlogger", HAND / "sensorlogger_android", tmp_path / "a")[0][0])
+    np.testing.assert_allclose(rec.imu["acc_z_mps2"].to_numpy(), android.imu["acc_z_mps2"].to_numpy(), atol=1e-5)
+
+
+def test_sensorlogger_without_gravity_is_refused(tmp_path):
+    src = tmp_path / "export"
+    shutil.copytree(HAND / "sensorlogger_ios", src)
+    (src / "Gravity.csv").unlink()
+    with pytest.raises(InputError, match="Gravity.csv"):
+        import_recordings("sensorlogger", src, tmp_path / "out")
+    assert not (tmp_path / "out").exists()
+
+
+def test_phyphox_folder_zip_and_decimal_comma(tmp_path):
+    src = HAND / "phyphox_multi"
+    rec = load_recording(_import("phyphox", src, tmp_path / "a")[0][0])
+    acc = pd.read_csv(src / "Accelerometer.csv")
+    assert abs(rec.imu["acc_y_mps2"].iloc[0] - acc["Y (m/s^2)"].iloc[1]) < 1e-7  # not the linear file, trimmed to gyro
+    assert "gyr_z_radps" in rec.imu and "baro_hpa" in rec.imu and "mag_x_ut" not in rec.imu
+    assert rec.meta["recording"]["start_unix_s"] == 1717236000.0
+    assert len(rec.gnss) == 2 and rec.geo_origin == (48.15, 11.58) and list(rec.gnss["alt_m"]) == [520.0, 520.2]
+    zipped = load_recording(_import("phyphox", _zip_folder(src, tmp_path / "walk.zip"), tmp_path / "b")[0][0])
+    pd.testing.assert_frame_equal(zipped.imu, rec.imu)
+    semi = load_recording(_import("phyphox", HAND / "phyphox_rawdata_semicolon", tmp_path / "c")[0][0])
+    np.testing.assert_allclose(semi.imu["acc_y_mps2"], acc["Y (m/s^2)"], rtol=1e-8)
+
+
+def test_phyphox_linear_only_and_g_units_are_refused(tmp_path, capsys):
+    lin = tmp_path / "lin"
+    lin.mkdir()
+    shutil.copy(HAND / "phyphox_multi" / "Linear Accelerometer.csv", lin)
+    rc, _, err = _cli(["import", "phyphox", lin, tmp_path / "out"], capsys)
+    _assert_one_error(rc, err)
+    assert "linear" in err and not (tmp_path / "out").exists()
+    g = tmp_path / "g"
+    g.mkdir()
+    acc = pd.read_csv(HAND / "phyphox_multi" / "Accelerometer.csv")
+    acc.iloc[:, 1:] = acc.iloc[:, 1:] / GRAVITY_MPS2  # a file in g mislabelled m/s^2
+    acc.to_csv(g / "Accelerometer.csv", index=False)
+    rc, _, err = _cli(["import", "phyphox", g, tmp_path / "out"], capsys)
+    _assert_one_error(rc, err)
+    assert "look like g" in err and not (tmp_path / "out").exists()
+
+
+@pytest.fixture
+def android_rec(tmp_path) -> Path:
+    return _import("sensorlogger", HAND / "sensorlogger_android", tmp_path / "recs")[0][0]
+
+
+def test_gpx_on_the_recording_clock(android_rec, capsys):
+    (android_rec / "gnss.csv").unlink()
+    extra = android_rec / "reference"
+    extra.mkdir()
+    (extra / "notes.txt").write_text("kept")
+    rc, out, err = _cli(["import", "gpx", HAND / "track.gpx", android_rec], capsys)
+    assert rc == 0 and out.strip() == str(android_rec), err
+    rec = load_recording(android_rec)
+    # start_unix_s = 10:00:00.200 UTC; points at :01, :02, :03.5 and 12:00:04+02:00
+    np.testing.assert_allclose(rec.gnss["t_s"], [0.8, 1.8, 3.3, 3.8])
+    assert np.isnan(rec.gnss["alt_m"].iloc[3]) and rec.gnss["alt_m"].iloc[0] == 52.3
+    assert rec.geo_origin == (50.78, 7.59)  # kept from the import
+    assert (extra / "notes.txt").read_text() == "kept"  # the rest of the recording is carried over
+
+
+def test_gpx_without_start_time_and_existing_gnss(android_rec, capsys):
+    meta = (android_rec / "meta.toml").read_text()
+    (android_rec / "meta.toml").write_text(meta.replace("start_unix_s", "# start_unix_s"))
+    rc, _, err = _cli(["import", "gpx", HAND / "track.gpx", android_rec], capsys)
+    _assert_one_error(rc, err)  # gnss.csv from the Sensor Logger import exists
+    assert "--force" in err
+    with pytest.warns(UserWarning, match="first point is taken as t_s = 0"):
+        rc, _, err = _cli(["import", "gpx", HAND / "track.gpx", android_rec, "--force"], capsys)
+    assert rc == 0
+    rec = load_recording(android_rec)
+    np.testing.assert_allclose(rec.gnss["t_s"], [0.0, 1.0, 2.5, 3.0])
+
+
+def test_gpx_entity_declarations_refused(android_rec, tmp_path, capsys):
+    bomb = tmp_path / "bomb.gpx"
+    bomb.write_text('<?xml version="1.0"?>\n<!DOCTYPE gpx [<!ENTITY a "aaaaaaaaaa"><!ENTITY b "&a;&a;&a;&a;">]>\n'
+                    '<gpx><trk><trkseg><trkpt lat="1" lon="2"><time>&b;</time></trkpt></trkseg></trk></gpx>\n')
+    before = (android_rec / "gnss.csv").read_bytes()
+    rc, _, err = _cli(["import", "gpx", bomb, android_rec, "--force"], capsys)
+    _assert_one_error(rc, err)
+    assert "DOCTYPE" in err and (android_rec / "gnss.csv").read_bytes() == before
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Hostile archives and bad input, through the CLI: exit 1, one error line, nothing written
+# ---------------------------------------------------------------------------------------------------------------
+
+
+def _zip_with(path: Path, members: dict[str, bytes], symlink: str | None = None) -> Path:
+    with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as zf:
+        for name, data in members.items():
+            zf.writestr(name, data)
+        if symlink:
+            info = zipfile.ZipInfo(symlink)
+            info.external_attr = (stat.S_IFLNK | 0o777) << 16
+            zf.writestr(info, "/etc/passwd")
+    return path
+
+
+@pytest.mark.parametrize("members, symlink, message", [
+    ({"../evil.csv": b"x"}, None, "escapes"),
+    ({"/abs/Accelerometer.csv": b"x"}, None, "absolute"),
+    ({"Gravity.csv": b"x"}, "Accelerometer.csv", "symbolic link"),
+    ({"Accelerometer.csv": b"0" * 2_000_000}, None, "compression ratio"),
+])
+def test_hostile_zip_refused(tmp_path, capsys, members, symlink, message):
+    archive = _zip_with(tmp_path / "export.zip", members, symlink)
+    for fmt in ("sensorlogger", "phyphox"):
+        rc, _, err = _cli(["import", fmt, archive, tmp_path / "out"], capsys)
+        _assert_one_error(rc, err)
+        assert message in err
+    assert not (tmp_path / "out").exists() and not (tmp_path / "evil.csv").exists()
+
+
+def test_zip_total_size_limit(tmp_path, capsys, monkeypatch):
+    archive = _zip_folder(HAND / "sensorlogger_android", tmp_path / "export.zip")
+    monkeypatch.setattr(_common, "MAX_ZIP_TOTAL_BYTES", 10_000)
+    rc, _, err = _cli(["import", "sensorlogger", archive, tmp_path / "out"], capsys)
+    _assert_one_error(rc, err)
+    assert "bytes" in err and not (tmp_path / "out").exists()
+
+
+def _truncated(src: Path, dest: Path) -> Path:
+    data = src.read_bytes()
+    dest.write_bytes(data[: len(data) // 2 + 7])  # cut in the middle of a row
+    return dest
+
+
+def _text_in_numbers(src: Path, dest: Path) -> Path:
+    lines = src.read_text().splitlines()
+    sep = "," if "," in lines[50] else " "
+    fields = lines[50].split(sep)
+    fields[3] = "abc"
+    lines[50] = sep.join(fields)
+    dest.write_text("\n".join(lines) + "\n")
+    return dest
+
+
+@pytest.mark.parametrize("case", ["missing", "empty", "truncated", "text", "wrong_folder", "wrong_file", "not_zip"])
+@pytest.mark.parametrize("fmt", ["xio", "oxford", "humolire", "gaitmap", "mobgap", "sensorlogger", "phyphox"])
+def test_bad_input_exit_1_one_line_no_output(tmp_path, capsys, fmt, case):
+    src_by_fmt = {"xio": XIO, "oxford": OXFORD / "validation" / "user1_hand_1506421989895.csv",
+                  "humolire": HUMOLIRE / "accelerometer-calibrated.txt", "gaitmap": GAITMAP / "imu_sample.csv",
+                  "mobgap": MOBGAP / "001" / "data.mat", "sensorlogger": HAND / "sensorlogger_android" / "TotalAcceleration.csv",
+                  "phyphox": HAND / "phyphox_multi" / "Accelerometer.csv"}
+    real = src_by_fmt[fmt]
+    folder_fmt = fmt in ("humolire", "mobgap", "sensorlogger", "phyphox")
+    if case == "missing":
+        src = tmp_path / "nothing"
+    elif case == "wrong_folder":
+        src = tmp_path / "wrong"
+        src.mkdir()
+        (src / "readme.txt").write_text("not a recording")
+    elif case == "not_zip":
+        src = tmp_path / "export.zip"
+        src.write_bytes(b"PK\x03\x04 not really a zip")
+    else:
+        work = tmp_path / "src"
+        if folder_fmt:
+            shutil.copytree(real.parent, work)
+        else:
+            work.mkdir()
+        target = work / real.name
+        if case == "empty":
+            target.write_bytes(b"")
+        elif case == "truncated":
+            _truncated(real, target)
+        elif case == "text":
+            if real.suffix == ".mat":
+                target.write_bytes(b"MATLAB 5.0 MAT-file, text where numbers should be" + b" " * 200)
+            else:
+                _text_in_numbers(real, target)
+        elif case == "wrong_file":
+            target.write_text("hello,world\n1,2\n")
+        src = work if folder_fmt else target
+    dest = tmp_path / "out"
+    rc, _, err = _cli(["import", fmt, src, dest], capsys)
+    _assert_one_error(rc, err)
+    assert _entries(dest) == []
+
+
+def test_existing_recording_needs_force_and_nothing_partial(tmp_path, capsys):
+    dest = tmp_path / "recs"
+    rc, out, _ = _cli(["import", "mobgap", MOBGAP / "001", dest], capsys)
+    assert rc == 0 and len(out.split()) == 3
+    shutil.rmtree(dest / "Test5_Trial1")
+    shutil.rmtree(dest / "Test11_Trial1")
+    rc, _, err = _cli(["import", "mobgap", MOBGAP / "001", dest], capsys)  # Test5_Trial2 still exists
+    _assert_one_error(rc, err)
+    assert _entries(dest) == ["Test5_Trial2"]  # none of the three written
+    rc, out, _ = _cli(["import", "mobgap", MOBGAP / "001", dest, "--force"], capsys)
+    assert rc == 0 and _entries(dest) == ["Test11_Trial1", "Test5_Trial1", "Test5_Trial2"]
+    rc, _, err = _cli(["import", "gaitmap", GAITMAP, dest, "--rate-hz", "-3"], capsys)
+    _assert_one_error(rc, err)
+
+
+def test_cli_prints_one_path_per_recording(tmp_path, capsys):
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no warning when the rate is given
+        rc, out, err = _cli(["import", "gaitmap", GAITMAP, tmp_path, "--rate-hz", "204.8"], capsys)
+    assert rc == 0
+    assert out.split() == [str(tmp_path / n) for n in ("walk_2x20m", "stairs_up", "stairs_down")]
