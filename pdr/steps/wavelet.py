@@ -10,6 +10,7 @@ import pywt
 
 from pdr.base import Algorithm
 from pdr.errors import InputError
+from pdr.signals.attitude import gravity_direction_lowpass
 from pdr.signals.resample import UniformImu, uniform_imu
 from pdr.steps.gait import bouts_from_mask, walking_mask
 
@@ -21,6 +22,16 @@ def acc_norm_signal(u: UniformImu) -> np.ndarray:
     """Orientation-independent detection signal: |specific force| minus its mean (m/s²)."""
     x = np.linalg.norm(u.acc_mps2, axis=1)
     return x - (x[u.valid].mean() if u.valid.any() else x.mean())
+
+
+def acc_vertical_signal(u: UniformImu) -> np.ndarray:
+    """Orientation-independent detection signal: specific force along the (low-passed) gravity direction, mean removed."""
+    up = gravity_direction_lowpass(u.acc_mps2, u.rate_hz)
+    x = np.einsum("ij,ij->i", u.acc_mps2, up)
+    return x - (x[u.valid].mean() if u.valid.any() else x.mean())
+
+
+DETECTION_SIGNALS = {"norm": acc_norm_signal, "vertical": acc_vertical_signal}
 
 
 def empty_steps() -> pd.DataFrame:
@@ -95,9 +106,11 @@ class WaveletStepDetection(Algorithm):
     """
 
     def __init__(self, *, level: int = 4, min_step_freq_hz: float = 1.0, max_step_freq_hz: float = 3.5,
-                 bout_window_s: float = 5.0, min_acc_std_mps2: float = 0.3, min_periodicity: float = 0.4,
-                 min_bout_steps: int = 4, min_peak_ratio: float = 0.25):
+                 bout_window_s: float = 5.0, min_acc_std_mps2: float = 0.3, min_periodicity: float = 0.25,
+                 min_bout_steps: int = 4, min_peak_ratio: float = 0.25, signal: str = "norm", bout_pad_s: float = 2.5):
         self.level = level
+        self.signal = signal
+        self.bout_pad_s = bout_pad_s
         self.min_step_freq_hz = min_step_freq_hz
         self.max_step_freq_hz = max_step_freq_hz
         self.bout_window_s = bout_window_s
@@ -123,12 +136,12 @@ class WaveletStepDetection(Algorithm):
             warnings.warn(f"steps: sampling rate {u.rate_hz:.1f} Hz is below twice the highest cadence "
                           f"({self.max_step_freq_hz} Hz); no steps detected", stacklevel=2)
             return self
-        x = acc_norm_signal(u)
+        x = DETECTION_SIGNALS[self.signal](u)
         walking, period = walking_mask(x, u.rate_hz, window_s=self.bout_window_s, min_step_s=min_step_s,
                                        max_step_s=max_step_s, min_acc_std_mps2=self.min_acc_std_mps2,
                                        min_periodicity=self.min_periodicity)
         bouts = bouts_from_mask(walking, u.valid, u.rate_hz, min_bout_s=self.min_bout_steps * min_step_s,
-                                pad_s=self.bout_window_s / 2)
+                                pad_s=self.bout_pad_s)
         times, bout_ids, rows = [], [], []
         bout_id = 0
         for a, b in bouts:

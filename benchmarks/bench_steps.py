@@ -1,0 +1,158 @@
+"""Step detection: Oxford step counting (9 phone recordings), mobgap lower-back initial contacts, speed.
+
+Tiny private loaders read the raw files of ``datasets/`` (or ``../shared/datasets``) so the benchmark does not
+depend on the importers. Every recording is reported; nothing is tuned per file.
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import scipy.io as sio
+
+from pdr.constants import GRAVITY_MPS2
+from pdr.signals import uniform_imu
+from pdr.steps import PeakStepDetection, WaveletStepDetection, acc_norm_signal, step_features
+
+ROOT = Path(__file__).resolve().parents[1]
+TOL_S = 0.25
+BRAJDIC = "Brajdic & Harle 2013: windowed peak detection < 3% count error"
+
+
+def _data(name: str) -> Path:
+    for base in (ROOT / ".." / "shared" / "datasets", ROOT / "datasets"):  # the full set first (datasets/ holds a subset)
+        if (base / name).is_dir():
+            return base / name
+    raise FileNotFoundError(name)
+
+
+def _imu(t: np.ndarray, acc: np.ndarray, gyr: np.ndarray | None = None) -> pd.DataFrame:
+    keep = np.concatenate([[True], np.diff(t) > 0])
+    cols = {"t_s": t[keep], "acc_x_mps2": acc[keep, 0], "acc_y_mps2": acc[keep, 1], "acc_z_mps2": acc[keep, 2]}
+    if gyr is not None:
+        cols.update(gyr_x_radps=gyr[keep, 0], gyr_y_radps=gyr[keep, 1], gyr_z_radps=gyr[keep, 2])
+    return pd.DataFrame(cols)
+
+
+def oxford_recordings() -> list[tuple[str, pd.DataFrame, np.ndarray, float]]:
+    """(name, imu, ground-truth step times, app count or NaN) for the 6 validation and 3 optimisation recordings."""
+    root = _data("oxford_step_counter")
+    out = []
+    for f in sorted((root / "validation").glob("user1_*.csv")):
+        a = pd.read_csv(f, header=None).to_numpy(float)
+        a = a[np.any(a[:, 1:4] != 0, axis=1)]
+        t = (a[:, 0] - a[0, 0]) / 1e9
+        steps = t[np.flatnonzero(np.diff(a[:, 5]) > 0) + 1]
+        out.append((f.stem.split("_")[1], _imu(t, a[:, 1:4]), steps, float(a[-1, 4] - a[0, 4])))
+    for d in sorted((root / "optimisation" / "data").iterdir()):
+        a = pd.read_csv(d / "accelerometer.csv", header=None).to_numpy(float)
+        s = pd.read_csv(d / "stepcounter.csv", header=None).to_numpy(float)
+        t0 = a[0, 0]
+        steps = np.sort(np.concatenate([(s[1:, 0][np.diff(s[:, c]) > 0] - t0) / 1e9 for c in (1, 2)]))
+        out.append((d.name, _imu((a[:, 0] - t0) / 1e9, a[:, 2:5]), steps, float("nan")))
+    return out
+
+
+def mobgap_trials() -> list[tuple[str, pd.DataFrame, np.ndarray, list[tuple[float, float]]]]:
+    """(name, imu, INDIP initial contacts (s), INDIP walking bouts) of the trials that have a reference."""
+    out = []
+    for part in sorted((_data("mobgap_lowerback_tvs_lab") / "lab" / "HA").iterdir()):
+        tm = sio.loadmat(part / "data.mat", squeeze_me=True, struct_as_record=False)["data"].TimeMeasure1
+        for test in tm._fieldnames:
+            for trial in getattr(tm, test)._fieldnames:
+                r = getattr(getattr(tm, test), trial)
+                lb = r.SU.LowerBack
+                fs = float(lb.Fs.Acc) if hasattr(lb.Fs, "Acc") else float(lb.Fs)
+                acc = np.asarray(lb.Acc, float) * GRAVITY_MPS2
+                gyr = np.radians(np.asarray(lb.Gyr, float))
+                ics, bouts = [], []
+                indip = getattr(r.Standards, "INDIP", None)
+                for wb in np.atleast_1d(getattr(indip, "ContinuousWalkingPeriod", [])):
+                    ics += list(np.atleast_1d(wb.InitialContact_Event).astype(float))
+                    bouts.append((float(wb.Start), float(wb.End)))
+                ics = np.asarray(ics)
+                ics = ics[np.isfinite(ics)]
+                if len(ics):
+                    out.append((f"{part.name}/{test}/{trial}", _imu(np.arange(len(acc)) / fs, acc, gyr), ics, bouts))
+    return out
+
+
+def match(det: np.ndarray, ref: np.ndarray, tol_s: float = TOL_S) -> tuple[int, int, int]:
+    """One-to-one matching within ``tol_s``: (true positives, false positives, false negatives)."""
+    used = np.zeros(len(det), bool)
+    tp = 0
+    for r in ref:
+        c = np.flatnonzero(~used & (np.abs(det - r) <= tol_s))
+        if len(c):
+            used[c[np.argmin(np.abs(det[c] - r))]] = True
+            tp += 1
+    return tp, int((~used).sum()), len(ref) - tp
+
+
+def _f1(tp: int, fp: int, fn: int) -> float:
+    return 2 * tp / max(2 * tp + fp + fn, 1)
+
+
+def _row(case: str, metric: str, ours: float, unit: str, target: str, anchor: str) -> dict:
+    return {"area": "steps", "case": case, "metric": metric, "ours": round(float(ours), 3), "unit": unit,
+            "target": target, "anchor": anchor}
+
+
+def run(quick: bool = False) -> list[dict]:
+    rows = []
+    warnings.simplefilter("ignore")
+    ox = oxford_recordings()
+    if quick:
+        ox = ox[:2]
+    errs = []
+    for name, imu, truth, app in ox:
+        n_true = len(truth)
+        wav = WaveletStepDetection().detect(imu).steps_.t_s.to_numpy()
+        peak = PeakStepDetection().detect(imu).steps_.t_s.to_numpy()
+        e = 100 * (len(wav) - n_true) / n_true
+        errs.append(abs(e))
+        tp, fp, fn = match(wav, truth)
+        rows.append(_row(f"oxford/{name} ({n_true} steps)", "count error wavelet", e, "%", "|e| <= 2", BRAJDIC))
+        rows.append(_row(f"oxford/{name}", "step F1 wavelet (0.25 s)", _f1(tp, fp, fn), "", "-", "-"))
+        rows.append(_row(f"oxford/{name}", "count error peak baseline", 100 * (len(peak) - n_true) / n_true, "%", "-", BRAJDIC))
+        if np.isfinite(app):
+            rows.append(_row(f"oxford/{name}", "count error app (steps_algo)", 100 * (app - n_true) / n_true, "%", "-",
+                             "Salvi et al. 2018 app"))
+    rows.append(_row("oxford/all", "max |count error| wavelet", max(errs), "%", "<= 2", BRAJDIC))
+
+    tot = np.zeros(3, int)
+    tot_in = np.zeros(3, int)
+    for name, imu, ics, bouts in mobgap_trials()[: 2 if quick else None]:
+        det = WaveletStepDetection().detect(imu).steps_.t_s.to_numpy()
+        m = np.array(match(det, ics))
+        inside = np.zeros(len(det), bool)
+        for a, b in bouts:
+            inside |= (det >= a - TOL_S) & (det <= b + TOL_S)
+        m_in = np.array(match(det[inside], ics))
+        tot += m
+        tot_in += m_in
+        rows.append(_row(f"mobgap/{name} ({len(ics)} ICs)", "IC F1 whole recording", _f1(*m), "", ">= 0.95", "-"))
+    anchor = "INDIP reference ICs (issue 3 target; no published figure checked here)"
+    rows.append(_row("mobgap/all", "IC F1 whole recording (bout detection included)", _f1(*tot), "", ">= 0.95", anchor))
+    rows.append(_row("mobgap/all", "IC F1 within reference walking bouts", _f1(*tot_in), "", ">= 0.95", anchor))
+
+    name, imu, truth, _ = ox[0]
+    u0 = uniform_imu(imu, 100.0)
+    reps = int(np.ceil(3600.0 / (u0.t_s[-1] - u0.t_s[0])))
+    n = reps * len(u0)
+    acc = np.tile(u0.acc_mps2, (reps, 1))
+    hour = pd.DataFrame({"t_s": np.arange(n) / 100.0, "acc_x_mps2": acc[:, 0], "acc_y_mps2": acc[:, 1], "acc_z_mps2": acc[:, 2]})
+    best = np.inf
+    for _ in range(1 if quick else 3):
+        t0 = time.perf_counter()
+        u = uniform_imu(hour)
+        det = WaveletStepDetection().detect(u)
+        step_features(det.steps_, u, acc_norm_signal(u))
+        best = min(best, time.perf_counter() - t0)
+    rows.append(_row(f"speed/{n / 100 / 3600:.2f} h at 100 Hz ({len(det.steps_)} steps)", "detection + features time", best, "s",
+                     "< 1", "-"))
+    return rows
