@@ -217,3 +217,161 @@ def render_leg_camera(kin: Kinematics, camera: CameraModel, t_start_s: float, t_
     t = t_start_s + np.arange(n) / camera.fps
     frames = LegCameraRenderer(camera, texture, **renderer_params).render(kin, t)
     return frames, pd.DataFrame({"t_s": t})
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# A sagittal walking model for the renderer's own tests and benchmark (richer than SLIP): joint angles as
+# Fourier series of the gait phase, the pelvis carried by the lowest point of either foot (no slipping, double
+# support where both feet are down). ``pdr.sim.gait.WalkKinematics`` (the simulator's full-body model) offers
+# the same two methods and is rendered the same way.
+# ----------------------------------------------------------------------------------------------------------------
+
+# Key points (gait phase from heel strike, degrees) of normal walking, after the textbook curves
+# (Winter, Biomechanics and Motor Control of Human Movement, ch. 7): hip flexion, knee flexion, ankle dorsiflexion.
+_HIP_KEYS = ((0.0, 25.0), (0.15, 20.0), (0.35, 2.0), (0.52, -12.0), (0.62, -5.0), (0.75, 18.0), (0.87, 27.0), (0.95, 26.0))
+_KNEE_KEYS = ((0.0, 4.0), (0.15, 18.0), (0.30, 10.0), (0.42, 5.0), (0.60, 38.0), (0.72, 62.0), (0.85, 35.0), (0.96, 4.0))
+_ANKLE_KEYS = ((0.0, 0.0), (0.07, -6.0), (0.30, 5.0), (0.48, 10.0), (0.62, -16.0), (0.72, -4.0), (0.85, 2.0), (0.95, 1.0))
+_HARMONICS = 5
+
+
+def _fourier_fit(keys: tuple[tuple[float, float], ...]) -> np.ndarray:
+    """Coefficients (a0, a1, b1, ...) of a 5-harmonic series through periodic key points (least squares on a
+    periodic linear interpolation of the keys, then smooth)."""
+    ph = np.array([k[0] for k in keys] + [keys[0][0] + 1.0])
+    val = np.array([k[1] for k in keys] + [keys[0][1]])
+    x = np.linspace(0.0, 1.0, 200, endpoint=False)
+    y = np.interp(x, ph, val)
+    cols = [np.ones_like(x)]
+    for h in range(1, _HARMONICS + 1):
+        cols += [np.cos(2 * np.pi * h * x), np.sin(2 * np.pi * h * x)]
+    return np.linalg.lstsq(np.column_stack(cols), y, rcond=None)[0]
+
+
+def _fourier_eval(coef: np.ndarray, phase: np.ndarray) -> np.ndarray:
+    out = np.full_like(phase, coef[0], dtype=float)
+    for h in range(1, _HARMONICS + 1):
+        out += coef[2 * h - 1] * np.cos(2 * np.pi * h * phase) + coef[2 * h] * np.sin(2 * np.pi * h * phase)
+    return out
+
+
+class FourierLegWalk:
+    """Straight walk along +x (east) from sagittal joint-angle Fourier series (hip, knee, ankle).
+
+    Parameters
+    ----------
+    stride_time_s : gait cycle duration.
+    amplitude : scale of the hip and knee excursions about their means (longer strides at 1.1-1.3).
+    thigh_length_m, shank_length_m : segment lengths; foot: ankle 0.08 m above the sole, heel 0.05 m behind
+        and toe 0.15 m ahead of the ankle.
+    duration_s : length of the walk.
+
+    Methods ``joint_positions_m(t)`` and ``segment_rotation(t, segment)`` follow ``pdr.sim.gait.WalkKinematics``;
+    ``true_strides(side)`` gives heel strike to heel strike lengths.
+    """
+
+    def __init__(self, *, stride_time_s: float = 1.1, amplitude: float = 1.0, thigh_length_m: float = 0.45,
+                 shank_length_m: float = 0.45, duration_s: float = 20.0, rate_hz: float = 1000.0):
+        self.stride_time_s = stride_time_s
+        self.amplitude = amplitude
+        self.lth, self.lsh = thigh_length_m, shank_length_m
+        self.heel_off = np.array([-0.05, -0.08])
+        self.toe_off = np.array([0.15, -0.08])
+        self._coef = {k: _fourier_fit(v) for k, v in (("hip", _HIP_KEYS), ("knee", _KNEE_KEYS), ("ankle", _ANKLE_KEYS))}
+        self._t = np.arange(0.0, duration_s + 1.0 / rate_hz, 1.0 / rate_hz)
+        rel = {side: self._leg(self._t, side) for side in ("left", "right")}
+        sole = np.stack([rel[s][p][:, 1] for s in rel for p in ("heel", "toe")], axis=1)  # z of 4 sole points
+        lowest = np.argmin(sole, axis=1)
+        pel_z = -sole[np.arange(len(self._t)), lowest]
+        xs = np.stack([rel[s][p][:, 0] for s in rel for p in ("heel", "toe")], axis=1)
+        vx = np.gradient(xs, self._t, axis=0)[np.arange(len(self._t)), lowest]
+        pel_x = np.concatenate([[0.0], np.cumsum(0.5 * (-vx[1:] - vx[:-1]) * np.diff(self._t))])
+        self._pelvis = np.column_stack([pel_x, pel_z])
+        self._rel = rel
+
+    def _angles(self, t: np.ndarray, side: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        phase = np.mod(t / self.stride_time_s + (0.0 if side == "left" else 0.5), 1.0)
+        hip = np.radians(_fourier_eval(self._coef["hip"], phase))
+        knee = np.radians(_fourier_eval(self._coef["knee"], phase))
+        ankle = np.radians(_fourier_eval(self._coef["ankle"], phase))
+        hip = np.radians(self._coef["hip"][0]) + self.amplitude * (hip - np.radians(self._coef["hip"][0]))
+        knee = np.radians(self._coef["knee"][0]) + self.amplitude * (knee - np.radians(self._coef["knee"][0]))
+        return hip, hip - knee, hip - knee + ankle  # thigh, shank (from vertical), foot pitch
+
+    def _leg(self, t: np.ndarray, side: str) -> dict[str, np.ndarray]:
+        th, sh, ft = self._angles(t, side)
+        knee = self.lth * np.column_stack([np.sin(th), -np.cos(th)])
+        ankle = knee + self.lsh * np.column_stack([np.sin(sh), -np.cos(sh)])
+        c, s = np.cos(ft), np.sin(ft)
+
+        def foot_point(off):
+            return ankle + np.column_stack([c * off[0] - s * off[1], s * off[0] + c * off[1]])
+
+        return {"knee": knee, "ankle": ankle, "heel": foot_point(self.heel_off), "toe": foot_point(self.toe_off)}
+
+    def joint_positions_m(self, t_s: np.ndarray) -> dict[str, np.ndarray]:
+        t = np.asarray(t_s, float)
+        if t.min() < self._t[0] or t.max() > self._t[-1]:
+            raise InputError(f"FourierLegWalk: expected times within 0..{self._t[-1]:.1f} s, found {t.min():.2f}..{t.max():.2f}")
+        px = np.interp(t, self._t, self._pelvis[:, 0])
+        pz = np.interp(t, self._t, self._pelvis[:, 1])
+        out = {"pelvis": np.column_stack([px, np.zeros_like(t), pz])}
+        for side, y in (("left", 0.1), ("right", -0.1)):
+            out[f"hip_{side}"] = np.column_stack([px, np.full_like(t, y), pz])
+            for name, p in self._leg(t, side).items():
+                out[f"{name}_{side}"] = np.column_stack([px + p[:, 0], np.full_like(t, y), pz + p[:, 1]])
+        return out
+
+    def segment_rotation(self, t_s: np.ndarray, segment: str) -> np.ndarray:
+        part, side = segment.split("_")
+        th, sh, ft = self._angles(np.asarray(t_s, float), side)
+        ang = {"thigh": th, "shank": sh}.get(part)
+        if ang is None:
+            raise InputError(f"FourierLegWalk: expected a thigh or shank segment, found {segment!r}")
+        c, s = np.cos(ang), np.sin(ang)
+        z = np.zeros_like(c)
+        # columns: x forward normal (c, 0, s), y = z x x = (0, -1, 0), z along the segment (s, 0, -c)
+        return np.stack([np.stack([c, z, s], -1), np.stack([z, z - 1.0, z], -1), np.stack([s, z, -c], -1)], axis=-1)
+
+    def true_strides(self, side: str = "left") -> pd.DataFrame:
+        """Heel strike (phase 0) to heel strike of one leg, length = heel advance (``reference/strides.csv``)."""
+        offset = 0.0 if side == "left" else 0.5 * self.stride_time_s
+        hs = np.arange(offset, self._t[-1], self.stride_time_s)
+        heel = self.joint_positions_m(hs)[f"heel_{side}"][:, 0]
+        return pd.DataFrame({"t_start_s": hs[:-1], "t_end_s": hs[1:], "foot": side, "length_m": np.diff(heel)})
+
+
+def camera_from_section(section: dict[str, Any]) -> CameraModel:
+    """The camera of a scenario's ``[camera]`` section (keys of camera.toml's [camera] plus ``segment`` and
+    ``distance_from_knee_m``); defaults: 160x120 at 100 fps, focal 120 px, left shank, 0.25 m below the knee."""
+    sec = dict(section or {})
+    known = {"fps", "focal_px", "width_px", "height_px", "cx_px", "cy_px", "segment", "distance_from_knee_m",
+             "texture", "texture_m_per_px", "exposure_s", "noise_std", "gain_drift"}
+    unknown = sorted(set(sec) - known)
+    if unknown:
+        raise InputError(f"scenario [camera]: unknown key(s) {', '.join(unknown)}; expected some of {', '.join(sorted(known))}")
+    w, h = int(sec.get("width_px", 160)), int(sec.get("height_px", 120))
+    cfg = {"camera": {"fps": sec.get("fps", 100.0), "focal_px": sec.get("focal_px", 120.0), "width_px": w, "height_px": h,
+                      "cx_px": sec.get("cx_px", (w - 1) / 2.0), "cy_px": sec.get("cy_px", (h - 1) / 2.0)},
+           "mount": {"segment": sec.get("segment", "shank_left"), "distance_from_knee_m": sec.get("distance_from_knee_m", 0.25)}}
+    return CameraModel.from_toml(cfg, what="scenario [camera]")
+
+
+def write_leg_camera(rec_dir: str | Path, kin: Kinematics, section: dict[str, Any], t_start_s: float, t_end_s: float,
+                     *, seed: int = 0) -> CameraModel:
+    """Render the walk into ``rec_dir``: ``video.avi``, ``frames.csv`` and ``camera.toml`` (CONTRACT.md).
+
+    The hook of ``pdr.sim.simulate`` for a scenario ``[camera]`` section; the true strides of the camera leg go to
+    ``reference/strides.csv`` from the walk itself.
+    """
+    from pdr.io.atomic import write_csv, write_text
+    from pdr.io.tomlio import dumps_toml
+
+    cam = camera_from_section(section)
+    params = {k: section[k] for k in ("texture_m_per_px", "exposure_s", "noise_std", "gain_drift") if k in section}
+    texture = load_texture(section.get("texture", "gravel"))
+    frames, table = render_leg_camera(kin, cam, t_start_s, t_end_s, texture, seed=seed, **params)
+    rec_dir = Path(rec_dir)
+    write_video(rec_dir / "video.avi", frames, cam.fps)
+    write_csv(rec_dir / "frames.csv", table)
+    write_text(rec_dir / "camera.toml", dumps_toml(cam.to_toml()))
+    return cam

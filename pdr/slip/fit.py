@@ -79,6 +79,15 @@ def segment_strides(t_s: np.ndarray, flow_pxps: np.ndarray, *, high_fraction: fl
     return pd.DataFrame(rows, columns=SEGMENT_COLUMNS) if rows else empty
 
 
+def _burst_start(t_s: np.ndarray, flow: np.ndarray, low_fraction: float = 0.12) -> float:
+    """Time where the swing burst of one stride of flow starts, by the rule of :func:`segment_strides`."""
+    ref = float(np.percentile(flow, 95))
+    i = int(np.argmax(flow))
+    while i > 0 and flow[i] > low_fraction * ref:
+        i -= 1
+    return float(t_s[i])
+
+
 class SlipOpticalFlowStride(Algorithm):
     """Stride length of the camera leg by fitting SLIP-simulated optical flow to the measured flow.
 
@@ -89,9 +98,12 @@ class SlipOpticalFlowStride(Algorithm):
     focal_px : focal length of the camera in pixels.
     swing_ratio : eta, shank swing peak over its toe-off angle (eq. 3.16).
     swing_peak_fraction : where in the swing the shank angle peaks (thesis Appendix E: 1/4).
+    swing_profile : "parabola" (thesis eq. 3.17) or "smooth" (shank at rest at heel strike; default).
     strides_per_fit : strides fitted together (thesis: 2, assumed equal).
     n_refine : best starts (grid and Table 2) refined by the local optimiser.
     max_evals : function evaluations per local refinement.
+    duration_weight : weight of the squared log ratio of simulated to measured stride time in the cost
+        (the time warp absorbs small mismatches; a large one means the fitted dynamics are wrong).
     length_scale : per-user factor on the model's stride length (1: none; see ``calibrate``).
     model_sigma_fraction : model error floor of the stride sigma, as a fraction of the length.
     min_quality : windows whose mean flow quality is below this give no stride (with a warning).
@@ -122,8 +134,9 @@ class SlipOpticalFlowStride(Algorithm):
 
     def __init__(self, *, thigh_length_m: float = 0.5, shank_length_m: float = 0.6, foot_length_m: float = 0.2,
                  mass_kg: float = 50.0, camera_from_knee_m: float = 0.28, focal_px: float = 1340.0,
-                 swing_ratio: float = 1.2, swing_peak_fraction: float = 0.25, strides_per_fit: int = 2,
-                 n_refine: int = 2, max_evals: int = 60, length_scale: float = 1.0,
+                 swing_ratio: float = 1.2, swing_peak_fraction: float = 0.25, swing_profile: str = "smooth",
+                 strides_per_fit: int = 2,
+                 n_refine: int = 2, max_evals: int = 60, duration_weight: float = 50.0, length_scale: float = 1.0,
                  model_sigma_fraction: float = 0.03, min_quality: float = 0.3, foot: str = "left"):
         self.thigh_length_m = thigh_length_m
         self.shank_length_m = shank_length_m
@@ -133,9 +146,11 @@ class SlipOpticalFlowStride(Algorithm):
         self.focal_px = focal_px
         self.swing_ratio = swing_ratio
         self.swing_peak_fraction = swing_peak_fraction
+        self.swing_profile = swing_profile
         self.strides_per_fit = strides_per_fit
         self.n_refine = n_refine
         self.max_evals = max_evals
+        self.duration_weight = duration_weight
         self.length_scale = length_scale
         self.model_sigma_fraction = model_sigma_fraction
         self.min_quality = min_quality
@@ -153,8 +168,9 @@ class SlipOpticalFlowStride(Algorithm):
         if step is None or not 0.2 < step.duration_s < 1.5:
             return None
         kin = stride_kinematics(step, self.body, self.camera_from_knee_m, stance_fraction=stance_fraction,
-                                swing_ratio=self.swing_ratio, swing_peak_fraction=self.swing_peak_fraction, dt_s=dt_s)
-        if kin.heel_m[:, 1].min() < -0.05 or not np.isfinite(kin.distance_m).all():
+                                swing_ratio=self.swing_ratio, swing_peak_fraction=self.swing_peak_fraction,
+                                swing_profile=self.swing_profile, dt_s=dt_s)
+        if kin.heel_m[:, 1].min() < -0.1 or not np.isfinite(kin.distance_m).all():
             return None  # the swing foot goes through the floor, or the camera looks above the horizon
         return kin.t_s, simulate_flow(kin, self.focal_px), kin.length_m, kin.duration_s
 
@@ -224,7 +240,7 @@ class SlipOpticalFlowStride(Algorithm):
                               f"from {win.t_start_s.iloc[0]:.2f} s to {win.t_end_s.iloc[-1]:.2f} s; no stride there", stacklevel=2)
                 continue
             stance = float(np.mean((win.t_toe_off_s - win.t_start_s) / (win.t_end_s - win.t_start_s)))
-            fit = self._fit_window(windows, stance, grid)
+            fit = self._fit_window(windows, stance, grid, median_stance)
             if fit is None:
                 continue
             fits.append(fit)
@@ -248,7 +264,7 @@ class SlipOpticalFlowStride(Algorithm):
                 out.append((p, sim))
         return out
 
-    def _fit_window(self, windows, stance: float, grid) -> dict | None:
+    def _fit_window(self, windows, stance: float, grid, grid_stance: float) -> dict | None:
         import time as _time
 
         t0 = _time.perf_counter()
@@ -261,9 +277,14 @@ class SlipOpticalFlowStride(Algorithm):
             dur = sim[3]
             # the SLIP's own stride time must stay near the measured one (the warp only absorbs small mismatches)
             pen = (math.log(dur * len(windows) / tm_total)) ** 2
-            return float(r @ r) * (1.0 + 4.0 * pen)
+            return float(r @ r) * (1.0 + self.duration_weight * pen)
 
         ranked = sorted(grid, key=lambda ps: cost_of(ps[1]))[: max(1, self.n_refine)]
+        # the measured toe off is where the flow burst starts; move the model's toe off by the lag between the two
+        # in the best grid stride, so that both are cut the same way
+        tau, fsim, _, tsim = ranked[0][1]
+        lag = float(np.clip(_burst_start(tau, fsim) / tsim - grid_stance, -0.1, 0.1))
+        stance = float(np.clip(stance - lag, 0.4, 0.75))
         lo = np.array([b[0] for b in BOUNDS])
         hi = np.array([b[1] for b in BOUNDS])
         scale = hi - lo

@@ -135,14 +135,17 @@ def simulate_step(vx_mps: float, vy_mps: float, leg_angle_rad: float, stiffness_
 
 
 def _two_link_knee(hip: np.ndarray, end: np.ndarray, l_upper: float, l_lower: float) -> np.ndarray:
-    """Knee of a two-link chain hip-knee-end (lengths l_upper, l_lower), bent forward (+x); a chain longer than
-    its links is held straight (eq. 3.12 solved with the unit-length constraints)."""
+    """Knee of a two-link chain hip-knee-end (lengths l_upper, l_lower), bent forward (+x); out of reach, the
+    chain is straight from the hip toward the end (eq. 3.12 solved with the unit-length constraints)."""
     d = hip - end
     dist = np.hypot(d[:, 0], d[:, 1])
     cos_a = np.clip((dist ** 2 + l_lower ** 2 - l_upper ** 2) / (2 * dist * l_lower), -1.0, 1.0)
     a = np.arccos(cos_a)
     ang = np.arctan2(d[:, 1], d[:, 0]) - a  # rotate end->hip clockwise: the knee comes forward
-    return end + l_lower * np.column_stack([np.cos(ang), np.sin(ang)])
+    knee = end + l_lower * np.column_stack([np.cos(ang), np.sin(ang)])
+    far = dist > l_upper + l_lower  # out of reach: the straight leg hangs from the hip, the end leaves the ground
+    knee[far] = hip[far] - l_upper * d[far] / dist[far, None]
+    return knee
 
 
 @dataclasses.dataclass
@@ -171,7 +174,8 @@ class StrideKinematics:
 
 
 def stride_kinematics(step: SlipStep, body: SlipBody, camera_from_knee_m: float, *, stance_fraction: float = 0.6,
-                      swing_ratio: float = 1.2, swing_peak_fraction: float = 0.25, dt_s: float = 0.002) -> StrideKinematics:
+                      swing_ratio: float = 1.2, swing_peak_fraction: float = 0.25, swing_profile: str = "parabola",
+                      dt_s: float = 0.002) -> StrideKinematics:
     """Leg kinematics of the camera leg in the three configurations (eq. 3.7-3.17).
 
     Parameters
@@ -180,12 +184,15 @@ def stride_kinematics(step: SlipStep, body: SlipBody, camera_from_knee_m: float,
     stance_fraction : toe off as a fraction of the stride (thesis code: 0.6).
     swing_ratio : eta = theta_max / theta_int of the shank in swing (eq. 3.16, thesis 1.2).
     swing_peak_fraction : where in the swing the parabola reaches eta theta_int (thesis Appendix E: 1/4).
+    swing_profile : "parabola" (eq. 3.17, the thesis) or "smooth" (cosine segments through the same three
+        angles, the shank at rest at the peak and at heel strike, as in real terminal swing).
 
     Notes
     -----
     Heel contact (heel fixed at x_H, until the end of the SLIP phase 1): knee from the two-link chain hip-knee-heel.
     Toe contact (foot pivoting about the toe x_T = x_H + L_ft, eq. 3.13-3.15): thigh and a virtual link
-    knee-toe of length sqrt(L_sh² + L_ft²) (foot at right angles to the shank). Swing: thigh angle linear in time
+    knee-toe whose length and angle to the shank are frozen when the heel lifts (the thesis takes the foot at
+    right angles to the shank, which makes the shank angle jump at heel lift). Swing: thigh angle linear in time
     from its toe-off value to the leg angle delta at the next heel strike; shank angle a parabola through its
     toe-off value, eta times it at the peak, and delta at heel strike.
     """
@@ -205,19 +212,21 @@ def stride_kinematics(step: SlipStep, body: SlipBody, camera_from_knee_m: float,
     heel0 = np.array([step.heel_x_m, 0.0])
     heel[m0] = heel0
     knee[m0] = _two_link_knee(hip[m0], np.broadcast_to(heel0, hip[m0].shape), lth, lsh)
-    # toe contact
+    # toe contact: the foot turns about the toe, the ankle keeps the angle it had when the heel lifted
     m1 = phase == 1
     toe = np.array([step.heel_x_m + lft, 0.0])
-    lvirt = math.hypot(lsh, lft)
-    k1 = _two_link_knee(hip[m1], np.broadcast_to(toe, hip[m1].shape), lth, lvirt)
-    knee[m1] = k1
-    kt = toe - k1
-    ktn = kt / np.hypot(kt[:, 0], kt[:, 1])[:, None]
-    beta = math.atan2(lft, lsh)  # angle knee->toe vs knee->heel
-    cb, sb = math.cos(beta), math.sin(beta)
-    # shank direction: knee->toe rotated clockwise by beta (back under the knee, toward the heel)
-    u = np.column_stack([cb * ktn[:, 0] + sb * ktn[:, 1], -sb * ktn[:, 0] + cb * ktn[:, 1]])
-    heel[m1] = k1 + lsh * u
+    if m1.any():
+        i_last = int(np.flatnonzero(m0)[-1]) if m0.any() else 0
+        k_t = knee[i_last] if m0.any() else _two_link_knee(hip[:1], heel0[None, :], lth, lsh)[0]
+        kh, kt = heel0 - k_t, toe - k_t
+        lvirt = float(np.hypot(*kt))
+        beta = math.atan2(kt[0] * kh[1] - kt[1] * kh[0], kt[0] * kh[0] + kt[1] * kh[1])  # knee->toe to knee->heel
+        k1 = _two_link_knee(hip[m1], np.broadcast_to(toe, hip[m1].shape), lth, lvirt)
+        knee[m1] = k1
+        ktn = (toe - k1) / np.hypot(*(toe - k1).T)[:, None]
+        cb, sb = math.cos(beta), math.sin(beta)
+        u = np.column_stack([cb * ktn[:, 0] - sb * ktn[:, 1], sb * ktn[:, 0] + cb * ktn[:, 1]])
+        heel[m1] = k1 + lsh * u
     # swing
     m2 = phase == 2
     if m2.any():
@@ -229,11 +238,17 @@ def stride_kinematics(step: SlipStep, body: SlipBody, camera_from_knee_m: float,
         ts, te = t[i0], T
         tau = (t[m2] - ts) / (te - ts)
         th1 = th1_0 + (delta - th1_0) * tau
-        # parabola through (0, th2_0), (p, eta th2_0), (1, delta) in normalised time
         p = float(np.clip(swing_peak_fraction, 0.05, 0.95))
-        a_mat = np.array([[0.0, 0.0, 1.0], [p * p, p, 1.0], [1.0, 1.0, 1.0]])
-        c2 = np.linalg.solve(a_mat, np.array([th2_0, swing_ratio * th2_0, delta]))
-        th2 = c2[0] * tau ** 2 + c2[1] * tau + c2[2]
+        th_peak = swing_ratio * th2_0
+        if swing_profile == "parabola":  # eq. 3.17: through (0, th2_0), (p, eta th2_0), (1, delta)
+            a_mat = np.array([[0.0, 0.0, 1.0], [p * p, p, 1.0], [1.0, 1.0, 1.0]])
+            c2 = np.linalg.solve(a_mat, np.array([th2_0, th_peak, delta]))
+            th2 = c2[0] * tau ** 2 + c2[1] * tau + c2[2]
+        else:  # smooth: cosine ease to the peak, then a cosine swing to delta, at rest at heel strike
+            s1 = np.clip(tau / p, 0.0, 1.0)
+            s2 = np.clip((tau - p) / (1.0 - p), 0.0, 1.0)
+            th2 = np.where(tau <= p, th2_0 + (th_peak - th2_0) * 0.5 * (1 - np.cos(np.pi * s1)),
+                           th_peak + (delta - th_peak) * 0.5 * (1 - np.cos(np.pi * s2)))
         knee[m2] = hip[m2] + lth * np.column_stack([np.sin(th1), -np.cos(th1)])
         heel[m2] = knee[m2] + lsh * np.column_stack([np.sin(th2), -np.cos(th2)])
     sh = heel - knee

@@ -1,0 +1,97 @@
+"""SLIP dynamics, leg kinematics, flow simulation and the model-to-flow fit (Liu, MS thesis ch. 3-4)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from pdr.constants import GRAVITY_MPS2
+from pdr.errors import InputError
+from pdr.slip import SlipBody, simulate_flow, simulate_step, stride_kinematics
+from pdr.slip.fit import SlipOpticalFlowStride, segment_strides
+
+BODY = SlipBody()
+
+
+def test_step_conserves_energy_and_ends_at_heel_strike():
+    step = simulate_step(1.3, -0.2, math.radians(15), 12000.0, BODY)
+    assert step is not None and step.length_m > 0.2 and 0.2 < step.duration_s < 1.5
+    t = np.linspace(0, step.duration_s, 200)
+    x, vx, y, vy = step.sol(t)
+    length = np.hypot(x - step.heel_x_m, y)
+    spring = 0.5 * 12000.0 * np.clip(BODY.leg_length_m - length, 0, None) ** 2
+    energy = 0.5 * BODY.mass_kg * (vx ** 2 + vy ** 2) + BODY.mass_kg * GRAVITY_MPS2 * y + spring
+    assert np.ptp(energy) / energy[0] < 1e-4
+    assert abs(y[-1] - BODY.leg_length_m * math.cos(math.radians(15))) < 1e-6 and vy[-1] < 0  # h_crit, descending
+
+
+def test_falling_model_returns_none():
+    assert simulate_step(0.3, -1.0, math.radians(25), 3000.0, BODY) is None
+
+
+def test_kinematics_lengths_contact_and_flow():
+    step = simulate_step(1.3, -0.2, math.radians(15), 12000.0, BODY)
+    kin = stride_kinematics(step, BODY, 0.3, stance_fraction=0.6, swing_profile="smooth")
+    np.testing.assert_allclose(np.hypot(*(kin.knee_m - kin.hip_m).T), BODY.thigh_length_m, atol=1e-9)
+    np.testing.assert_allclose(np.hypot(*(kin.heel_m - kin.knee_m).T), BODY.shank_length_m, atol=1e-9)
+    heel = kin.heel_m[kin.phase == 0]
+    assert np.ptp(heel[:, 0]) == 0 and np.all(heel[:, 1] == 0)  # heel fixed during heel contact
+    assert np.max(np.abs(np.diff(kin.shank_angle_rad))) < 0.05  # no jump between configurations
+    assert set(np.unique(kin.phase)) == {0, 1, 2}
+    flow = simulate_flow(kin, 140.0)
+    # pivoting about the heel under the optical axis: no flow in heel contact; a large forward burst in swing
+    assert np.max(np.abs(flow[kin.phase == 0][2:-2])) < 5.0
+    assert np.max(flow[kin.phase == 2]) > 500.0
+    assert kin.length_m == pytest.approx(2 * step.length_m)
+
+
+def test_thesis_parabola_swing_runs():
+    step = simulate_step(1.5, 0.0, math.radians(12), 18000.0, BODY)
+    kin = stride_kinematics(step, BODY, 0.28, swing_profile="parabola")
+    assert np.isfinite(simulate_flow(kin, 1340.0)).all()
+
+
+def _measured(est, params, n_strides=4, noise=20.0, seed=0):
+    tau, flow, length, dur = est.simulate(params, 0.6)
+    t = np.arange(0, n_strides * dur + 0.5, 0.01) + 0.005
+    f = np.interp(np.mod(t - 0.2, dur), tau, flow)
+    f[t < 0.2] = 0.0
+    return t, f + np.random.default_rng(seed).normal(0, noise, len(t)), length, dur
+
+
+def test_segmentation_finds_heel_strikes():
+    est = SlipOpticalFlowStride(camera_from_knee_m=0.3, focal_px=140.0)
+    t, f, _, dur = _measured(est, (1.3, -0.2, math.radians(15), 12000.0))
+    seg = segment_strides(t, f)
+    assert len(seg) == 3
+    np.testing.assert_allclose(np.diff(seg.t_start_s), dur, atol=0.03)
+    assert np.all((seg.t_toe_off_s - seg.t_start_s) / (seg.t_end_s - seg.t_start_s) > 0.5)
+
+
+def test_fit_recovers_its_own_model_roughly():
+    est = SlipOpticalFlowStride(camera_from_knee_m=0.3, focal_px=140.0, foot="right")
+    t, f, length, _ = _measured(est, (1.3, -0.2, math.radians(15), 12000.0))
+    est.estimate(t, f)
+    s = est.strides_
+    assert list(s.columns) == ["t_start_s", "t_end_s", "foot", "length_m", "length_std_m", "source"]
+    assert len(s) == 3 and (s.foot == "right").all() and (s.source == "leg_camera").all()
+    assert np.all(np.abs(s.length_m / length - 1) < 0.15)
+    assert np.all(s.length_std_m > 0.02 * s.length_m)
+    assert (est.fits_.time_s < 3.0).all()
+
+
+def test_fit_bad_and_degenerate_input():
+    est = SlipOpticalFlowStride()
+    with pytest.raises(InputError, match="strictly increasing"):
+        est.estimate([0.0, 0.2, 0.1], [1.0, 2.0, 3.0])
+    with pytest.raises(InputError, match="one length"):
+        est.estimate([0.0, 0.1], [1.0])
+    with pytest.warns(UserWarning, match="no complete stride"):
+        assert est.estimate(np.arange(100) * 0.01, np.zeros(100)).strides_.empty
+    t = np.arange(0, 5, 0.01)
+    with pytest.warns(UserWarning, match="no complete stride"):  # no flow at all (blank floor): no stride
+        assert est.estimate(t, np.full(len(t), np.nan)).strides_.empty
+    with pytest.raises(InputError, match="positive"):
+        SlipBody(thigh_length_m=-0.5)
