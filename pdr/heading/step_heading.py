@@ -10,7 +10,7 @@ from scipy import signal
 
 from pdr.base import Algorithm
 from pdr.errors import InputError
-from pdr.signals.attitude import Attitude, earth_acceleration, quat_mul, rotate, yaw_increments
+from pdr.signals.attitude import Attitude, earth_acceleration, rotate, yaw_increments
 from pdr.signals.resample import UniformImu
 
 HEADING_COLUMNS = ["heading_rad", "heading_change_rad", "heading_change_std_rad", "mag_heading_rad", "mag_heading_std_rad"]
@@ -173,24 +173,26 @@ class AttitudeStepHeading(Algorithm):
         bias_sigma = attitude.bias_sigma_radps[i_hi]
         self.heading_change_std_rad_ = np.sqrt((bias_sigma * dt) ** 2 + self.gyro_arw_rad_per_sqrt_s ** 2 * dt
                                                + self.step_direction_std_rad ** 2)
-        if attitude.q9_wxyz is not None and u.mag_ut is not None:
+        if u.mag_ut is not None:
             self._mag_heading(u, attitude, i_hi)
         return self
 
     def _mag_heading(self, u: UniformImu, attitude: Attitude, i_step: np.ndarray) -> None:
-        """Absolute heading: the step heading turned by the 9D-vs-6D yaw of VQF, where the field looks undisturbed."""
-        rel = quat_mul(attitude.q9_wxyz, attitude.q_wxyz * np.array([1.0, -1.0, -1.0, -1.0]))
-        delta = 2.0 * np.arctan2(rel[:, 3], rel[:, 0])
-        up = np.column_stack([np.zeros(len(u)), np.zeros(len(u)), np.ones(len(u))])
-        conj6 = attitude.q_wxyz * np.array([1.0, -1.0, -1.0, -1.0])
-        up_s = rotate(conj6, up)
-        norm = np.linalg.norm(u.mag_ut, axis=1)
-        dip = np.arcsin(np.clip(-(u.mag_ut * up_s).sum(axis=1) / np.maximum(norm, 1e-9), -1, 1))
-        base = ~attitude.mag_disturbed
-        if not base.any():
-            return
-        med_norm, med_dip = np.median(norm[base]), np.median(dip[base])
-        trusted = base & (np.abs(norm / med_norm - 1.0) <= self.mag_norm_tolerance) & (np.abs(dip - med_dip) <= self.mag_dip_tolerance_rad)
+        """Absolute heading from the tilt-compensated magnetometer, where the field looks undisturbed.
+
+        The field is rotated into the 6D earth frame; the angle of its horizontal part is magnetic north there, so the
+        6D step heading turns into east-north-up by ``pi/2 - angle``. Trusted samples: |B| and dip within the
+        tolerances of the recording's medians and not flagged by VQF's disturbance detection (the flag is ignored when
+        VQF never accepted a field: it needs rotation to learn the reference field, which a straight walk lacks).
+        """
+        m_e = rotate(attitude.q_wxyz, u.mag_ut)
+        norm = np.linalg.norm(m_e, axis=1)
+        dip = np.arcsin(np.clip(-m_e[:, 2] / np.maximum(norm, 1e-9), -1.0, 1.0))
+        delta = np.pi / 2 - np.arctan2(m_e[:, 1], m_e[:, 0])
+        med_norm, med_dip = np.median(norm[u.valid]), np.median(dip[u.valid])
+        trusted = u.valid & (np.abs(norm / med_norm - 1.0) <= self.mag_norm_tolerance) & (np.abs(dip - med_dip) <= self.mag_dip_tolerance_rad)
+        if (~attitude.mag_disturbed).any():
+            trusted &= ~attitude.mag_disturbed
         ok = trusted[i_step]
         self.mag_heading_rad_ = np.where(ok, wrap(self.heading_rad_ + delta[i_step]), np.nan)
         self.mag_heading_std_rad_ = np.where(ok, self.mag_heading_std_rad, np.nan)
