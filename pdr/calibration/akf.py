@@ -1,0 +1,223 @@
+"""Adaptive Kalman calibration of the step length with GNSS (Ladetto et al. 2000, section 5)."""
+
+from __future__ import annotations
+
+import warnings
+from collections import deque
+
+import numpy as np
+import pandas as pd
+
+from pdr.base import Algorithm
+from pdr.calibration.segments import gnss_segments
+from pdr.errors import InputError
+from pdr.step_length.models import StepLengthModel
+
+TRACE_COLUMNS = ("rec_index", "t_s", "model_step_m", "step_length_m", "step_length_std_m", "process_std_m")
+
+
+class AdaptiveKalmanCalibration(Algorithm):
+    """Per-user step length from GNSS: an adaptive Kalman filter on the step length, and the model's parameters.
+
+    Parameters
+    ----------
+    measurement_std_m : floor of the measurement noise of one segment (the paper: 5 cm, DGPS); the GNSS part,
+        ``sqrt(2) * h_acc / (n_steps * straightness)``, is added in quadrature.
+    process_std_init_m : initial process noise per step (the paper: 10 cm).
+    process_std_min_m : floor of the adapted process noise per step.
+    innovation_window : number of recent innovations whose spread sets the process noise.
+    segment_steps : steps per GNSS segment (a segment ends at the first usable fix this many steps after its start).
+    min_segment_steps, max_h_acc_m, assumed_h_acc_m, min_straightness, min_step_m, max_step_m : the segment gates
+        of :func:`pdr.calibration.segments.gnss_segments` (``assumed_h_acc_m`` for fixes without ``h_acc_m``).
+    min_freq_spread_hz : the segments see "several walking frequencies" when the standard deviation of their mean
+        step frequencies reaches this; otherwise only A (the first parameter) is updated.
+
+    Attributes
+    ----------
+    model_ : the calibrated model (same class as the one given; parameters and covariance updated).
+    updated_ : which parameters were updated: ``"all"``, the name of the first parameter (one frequency), or ``"none"``.
+    segments_ : every candidate GNSS segment (``gnss_segments`` columns + ``rec_index``, ``measured_std_m``,
+        ``model_step_m``, ``innovation_m``, ``freq_hz``), with ``used`` and the rejection ``reason``.
+    trace_ : per step, the filter's course: ``rec_index, t_s, model_step_m`` (uncalibrated prediction),
+        ``step_length_m`` / ``step_length_std_m`` (filtered), ``process_std_m`` (adapted).
+    step_length_m_, step_length_std_m_ : the filtered step length per step (all recordings, in order).
+    n_steps_, distance_m_ : steps and GNSS metres inside the used segments.
+
+    Notes
+    -----
+    Ladetto et al. (2000), section 5. State: the step length, ``step(k) = step(k-1) + u(k-1)``; measurement:
+    ``GPS distance / number of steps = step(k) + n(k)`` over a segment. Here the mean of u is the model's predicted
+    change from step k-1 to k (zero for a model with A only, which is the paper's filter), so the state is the model's
+    prediction plus a slowly varying correction, and a segment measures the mean of the state over its steps.
+    Measurement noise: 5 cm (plus the GNSS accuracy of the segment); process noise: 10 cm initially, then adapted from
+    the distribution of the recent innovations v (innovation-based adaptive estimation, Mohamed & Schwarz 1999):
+    ``q = max(q_min, mean(v^2 - R - P+) / steps between updates)`` -- larger residuals, larger process noise, so a
+    change of pace is followed within a few segments and a steady pace is averaged over many.
+    The model: every used segment is a linear measurement of the parameters (the mean over its steps of the model's
+    design row), combined with the model's covariance as prior (Bayesian least squares, i.e. the regression of the
+    filtered step lengths on the features with a prior). With one walking frequency only A is updated, the others
+    kept "until new frequencies can be observed".
+
+    Example
+    -------
+    >>> from pdr.step_length import RegressionStepLength
+    >>> akf = AdaptiveKalmanCalibration().fit(steps, gnss, RegressionStepLength.population())  # doctest: +SKIP
+    >>> akf.model_, akf.updated_  # doctest: +SKIP
+    """
+
+    def __init__(self, *, measurement_std_m: float = 0.05, process_std_init_m: float = 0.10,
+                 process_std_min_m: float = 0.002, innovation_window: int = 3, segment_steps: float = 20.0,
+                 min_segment_steps: float = 8.0, max_h_acc_m: float = 10.0, assumed_h_acc_m: float = 5.0,
+                 min_straightness: float = 0.9, min_step_m: float = 0.2, max_step_m: float = 1.6,
+                 min_freq_spread_hz: float = 0.1):
+        self.measurement_std_m = measurement_std_m
+        self.process_std_init_m = process_std_init_m
+        self.process_std_min_m = process_std_min_m
+        self.innovation_window = innovation_window
+        self.segment_steps = segment_steps
+        self.min_segment_steps = min_segment_steps
+        self.max_h_acc_m = max_h_acc_m
+        self.assumed_h_acc_m = assumed_h_acc_m
+        self.min_straightness = min_straightness
+        self.min_step_m = min_step_m
+        self.max_step_m = max_step_m
+        self.min_freq_spread_hz = min_freq_spread_hz
+
+    def _check(self) -> None:
+        for name in ("measurement_std_m", "process_std_init_m", "process_std_min_m", "segment_steps", "min_segment_steps",
+                     "max_h_acc_m", "assumed_h_acc_m", "max_step_m"):
+            v = getattr(self, name)
+            if not isinstance(v, (int, float)) or isinstance(v, bool) or not np.isfinite(v) or v <= 0:
+                raise InputError(f"AdaptiveKalmanCalibration: expected {name} a positive number, found {v!r}")
+        if not isinstance(self.innovation_window, int) or self.innovation_window < 1:
+            raise InputError(f"AdaptiveKalmanCalibration: expected innovation_window a positive integer, found {self.innovation_window!r}")
+        if not 0 <= self.min_straightness <= 1:
+            raise InputError(f"AdaptiveKalmanCalibration: expected min_straightness in [0, 1], found {self.min_straightness!r}")
+
+    def fit(self, steps: pd.DataFrame | list[pd.DataFrame], gnss: pd.DataFrame | list[pd.DataFrame | None],
+            model: StepLengthModel, subject: dict | list[dict | None] | None = None):
+        """Calibrate ``model`` on one recording's steps and GNSS (``t_s, e_m, n_m[, h_acc_m]`` in the local frame), or
+        on lists of them (one entry per recording; a None GNSS contributes no segment). Returns self."""
+        self._check()
+        if not isinstance(model, StepLengthModel):
+            raise InputError(f"AdaptiveKalmanCalibration: expected a step-length model, found {type(model).__name__}")
+        steps_list = steps if isinstance(steps, list) else [steps]
+        gnss_list = gnss if isinstance(gnss, list) else [gnss]
+        subjects = subject if isinstance(subject, list) else [subject] * len(steps_list)
+        if not (len(steps_list) == len(gnss_list) == len(subjects)):
+            raise InputError(f"AdaptiveKalmanCalibration: expected as many GNSS tables and subjects as steps tables, "
+                             f"found {len(steps_list)} steps, {len(gnss_list)} GNSS, {len(subjects)} subjects")
+        seg_tables, traces, rows_x = [], [], []
+        for r, (st, gn, subj) in enumerate(zip(steps_list, gnss_list, subjects)):
+            x = model.design(st, subj) if len(st) else np.empty((0, len(model.theta_names)))
+            pred = np.clip(x @ model.theta, 0.0, None)
+            segs = gnss_segments(st, gn if gn is not None else _NO_GNSS, **self._seg_args())
+            segs = segs.assign(rec_index=r)
+            segs["measured_std_m"] = np.sqrt(self.measurement_std_m ** 2
+                                             + 2.0 * (segs["h_acc_m"] / (segs["n_steps"] * segs["straightness"])) ** 2)
+            freq = st["step_freq_hz"].to_numpy(float) if "step_freq_hz" in st.columns else np.full(len(st), np.nan)
+            segs["freq_hz"] = [float(np.nanmean(freq[a:b + 1])) if b >= a and np.isfinite(freq[a:b + 1]).any() else np.nan
+                               for a, b in zip(segs["k_first"], segs["k_last"])]
+            segs["model_step_m"] = [float(pred[a:b + 1].mean()) if b >= a else np.nan
+                                    for a, b in zip(segs["k_first"], segs["k_last"])]
+            trace, innov = self._filter(st["t_s"].to_numpy(float), pred, x, segs, model)
+            segs["innovation_m"] = innov
+            traces.append(trace.assign(rec_index=r))
+            seg_tables.append(segs)
+            rows_x.append([x[a:b + 1].mean(axis=0) for a, b in zip(segs["k_first"], segs["k_last"])])
+        self.segments_ = pd.concat(seg_tables, ignore_index=True)
+        self.trace_ = pd.concat(traces, ignore_index=True)[list(TRACE_COLUMNS)]
+        self.step_length_m_ = self.trace_["step_length_m"].to_numpy(float)
+        self.step_length_std_m_ = self.trace_["step_length_std_m"].to_numpy(float)
+        used = self.segments_["used"].to_numpy(bool)
+        self.n_steps_ = float(self.segments_.loc[used, "n_steps"].sum())
+        self.distance_m_ = float(self.segments_.loc[used, "distance_m"].sum())
+        design = np.array([row for rows in rows_x for row in rows]).reshape(-1, len(model.theta_names))
+        self.model_, self.updated_ = self._update_model(model, design[used], self.segments_[used])
+        return self
+
+    def _seg_args(self) -> dict:
+        return dict(segment_steps=self.segment_steps, min_segment_steps=self.min_segment_steps, max_h_acc_m=self.max_h_acc_m,
+                    assumed_h_acc_m=self.assumed_h_acc_m, min_straightness=self.min_straightness,
+                    min_step_m=self.min_step_m, max_step_m=self.max_step_m)
+
+    @staticmethod
+    def _prior_cov(model: StepLengthModel) -> np.ndarray:
+        cov = model.covariance_matrix
+        return np.asarray(type(model).preset["covariance"], float) if cov is None else cov
+
+    def _prior_var(self, model: StepLengthModel, x: np.ndarray) -> float:
+        """Initial variance of the state: the model's parameter uncertainty at the mean features (m²)."""
+        if len(x) == 0:
+            return self.process_std_init_m ** 2
+        xm = x.mean(axis=0)
+        return float(xm @ self._prior_cov(model) @ xm)
+
+    def _filter(self, t_s: np.ndarray, pred: np.ndarray, x: np.ndarray, segs: pd.DataFrame,
+                model: StepLengthModel) -> tuple[pd.DataFrame, np.ndarray]:
+        """Run the filter over one recording's steps; returns the per-step trace and the innovation of each segment."""
+        n = len(pred)
+        est, std, qstd = np.empty(n), np.empty(n), np.empty(n)
+        innov = np.full(len(segs), np.nan)
+        used = segs.loc[segs["used"]].sort_values("k_last")
+        by_step: dict[int, list] = {}
+        for j, row in used.iterrows():
+            by_step.setdefault(int(row.k_last), []).append((j, row))
+        bias = 0.0  # state = pred(k) + bias(k): step(k) = step(k-1) + [pred(k) - pred(k-1)] + u(k-1)
+        p = self._prior_var(model, x)
+        q = self.process_std_init_m ** 2
+        history: deque = deque(maxlen=self.innovation_window)
+        p_post_prev, last_k = p, -1
+        for k in range(n):
+            if k > 0:
+                p += q
+            for j, row in by_step.get(k, []):
+                z = float(row.measured_step_m)
+                r = float(row.measured_std_m) ** 2
+                v = z - (float(row.model_step_m) + bias)
+                s = p + r
+                gain = p / s
+                bias += gain * v
+                p = (1.0 - gain) * p
+                innov[j] = v
+                history.append((v * v - r - p_post_prev) / max(k - last_k, 1))
+                q = max(self.process_std_min_m ** 2, float(np.mean(history)))
+                p_post_prev, last_k = p, k
+            est[k] = pred[k] + bias
+            std[k] = np.sqrt(p + float(model.residual_std_m) ** 2)
+            qstd[k] = np.sqrt(q)
+        trace = pd.DataFrame({"t_s": t_s, "model_step_m": pred, "step_length_m": est, "step_length_std_m": std,
+                              "process_std_m": qstd})
+        return trace, innov
+
+    def _update_model(self, model: StepLengthModel, x: np.ndarray, segs: pd.DataFrame) -> tuple[StepLengthModel, str]:
+        if len(segs) == 0:
+            warnings.warn("calibration: no GNSS segment passed the gates (usable fixes, walking, straight); "
+                          "the model is unchanged", stacklevel=3)
+            return model.with_theta(model.theta, model.covariance_matrix), "none"
+        theta0 = model.theta
+        p = len(theta0)
+        prior = self._prior_cov(model)
+        n_steps = segs["n_steps"].to_numpy(float)
+        w = 1.0 / (segs["measured_std_m"].to_numpy(float) ** 2 + float(model.residual_std_m) ** 2 / n_steps)
+        z = segs["measured_step_m"].to_numpy(float)
+        freq = segs["freq_hz"].to_numpy(float)
+        several = p > 1 and np.isfinite(freq).sum() > 1 and float(np.nanstd(freq)) >= self.min_freq_spread_hz
+        cols = list(range(p)) if several or p == 1 else [0]
+        fixed = [i for i in range(p) if i not in cols]
+        resid = z - x @ theta0
+        xf = x[:, cols]
+        prior_inv = np.linalg.inv(prior[np.ix_(cols, cols)])
+        post_cov = np.linalg.inv(prior_inv + xf.T @ (w[:, None] * xf))
+        delta = post_cov @ (xf.T @ (w * resid))
+        theta = theta0.copy()
+        theta[cols] += delta
+        cov = prior.copy()
+        if fixed:  # A alone: its variance updated, its correlations with the kept parameters dropped
+            cov[0, :] = 0.0
+            cov[:, 0] = 0.0
+        cov[np.ix_(cols, cols)] = post_cov
+        return model.with_theta(theta, cov), "all" if len(cols) == p else model.theta_names[0]
+
+
+_NO_GNSS = pd.DataFrame({"t_s": pd.Series(dtype=float), "e_m": pd.Series(dtype=float), "n_m": pd.Series(dtype=float)})

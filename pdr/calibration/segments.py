@@ -1,0 +1,113 @@
+"""GNSS walking segments: "GPS distance / number of steps" measurements of the mean step length (Ladetto et al. 2000).
+
+A segment runs from one usable GNSS fix A to a later one B of the same walking bout. Its measurement is the chord
+|p_B - p_A| divided by the number of steps walked between the two fix times (fractional at both ends, from the step
+instants) times the straightness of the walked path: the mean resultant length of the steps' unit heading vectors,
+so a corner inside a segment does not shorten the measured step (1 when the steps carry no heading).
+
+Gates (the reason of a rejection is kept): only fixes with a finite position and a reported 1-sigma horizontal
+accuracy ``h_acc_m`` of at most ``max_h_acc_m`` end segments; both fixes must lie inside one bout of detected steps
+(walking the whole time); at least ``min_segment_steps`` steps; straightness at least ``min_straightness``; and the
+measured step inside ``[min_step_m, max_step_m]``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from pdr.errors import InputError
+
+SEGMENT_COLUMNS = ("t_start_s", "t_end_s", "n_steps", "distance_m", "straightness", "h_acc_m", "measured_step_m",
+                   "k_first", "k_last", "used", "reason")
+
+
+def _check_steps(steps: pd.DataFrame) -> None:
+    if not isinstance(steps, pd.DataFrame) or "t_s" not in steps.columns:
+        raise InputError(f"calibration: expected a steps table with t_s, found "
+                         f"{', '.join(map(str, getattr(steps, 'columns', []))) or type(steps).__name__}")
+    t = steps["t_s"].to_numpy(float)
+    if not np.isfinite(t).all() or (len(t) > 1 and (np.diff(t) <= 0).any()):
+        raise InputError("calibration: expected steps t_s finite and strictly increasing, found NaN or unsorted times")
+
+
+def check_gnss(gnss: pd.DataFrame) -> pd.DataFrame:
+    """The GNSS table in the local frame: ``t_s, e_m, n_m, h_acc_m`` (NaN rows = invalid fixes)."""
+    if not isinstance(gnss, pd.DataFrame):
+        raise InputError(f"calibration: expected GNSS as a DataFrame with t_s, e_m, n_m, found {type(gnss).__name__}")
+    missing = [c for c in ("t_s", "e_m", "n_m") if c not in gnss.columns]
+    if missing:
+        raise InputError(f"calibration: expected GNSS columns t_s, e_m, n_m (local east/north, m), found "
+                         f"{', '.join(map(str, gnss.columns))}")
+    t = gnss["t_s"].to_numpy(float)
+    if not np.isfinite(t).all() or (len(t) > 1 and (np.diff(t) <= 0).any()):
+        raise InputError("calibration: expected GNSS t_s finite and strictly increasing, found NaN or unsorted times")
+    h = gnss["h_acc_m"].to_numpy(float) if "h_acc_m" in gnss.columns else np.full(len(t), np.nan)
+    if (h[np.isfinite(h)] <= 0).any():
+        raise InputError("calibration: expected GNSS h_acc_m > 0 (1-sigma horizontal accuracy, m), found a value <= 0")
+    return pd.DataFrame({"t_s": t, "e_m": gnss["e_m"].to_numpy(float), "n_m": gnss["n_m"].to_numpy(float), "h_acc_m": h})
+
+
+def gnss_segments(steps: pd.DataFrame, gnss: pd.DataFrame, *, segment_steps: float, min_segment_steps: float,
+                  max_h_acc_m: float, assumed_h_acc_m: float, min_straightness: float, min_step_m: float,
+                  max_step_m: float) -> pd.DataFrame:
+    """One row per candidate segment (columns :data:`SEGMENT_COLUMNS`); ``used`` marks those that passed the gates.
+
+    ``k_first``/``k_last`` are the indices (into ``steps``) of the first and last step contact inside the segment.
+    Fixes without ``h_acc_m`` are taken at ``assumed_h_acc_m``.
+    """
+    _check_steps(steps)
+    gnss = check_gnss(gnss)
+    empty = pd.DataFrame({c: pd.Series(dtype=float) for c in SEGMENT_COLUMNS})
+    if len(steps) < 2 or len(gnss) < 2:
+        return empty
+    t_step = steps["t_s"].to_numpy(float)
+    bout = steps["bout_id"].to_numpy() if "bout_id" in steps.columns else np.zeros(len(steps), int)
+    heading = steps["heading_rad"].to_numpy(float) if "heading_rad" in steps.columns else np.full(len(steps), np.nan)
+    h_acc = gnss["h_acc_m"].fillna(assumed_h_acc_m).to_numpy(float)
+    finite = np.isfinite(gnss["e_m"].to_numpy()) & np.isfinite(gnss["n_m"].to_numpy())
+    good = finite & (h_acc <= max_h_acc_m)
+    tg, eg, ng = gnss["t_s"].to_numpy(float), gnss["e_m"].to_numpy(float), gnss["n_m"].to_numpy(float)
+
+    # bout spans and the continuous step count c(t) inside each bout
+    rows = []
+    bout_change = np.flatnonzero(np.diff(bout) != 0) + 1
+    for lo, hi in zip(np.r_[0, bout_change], np.r_[bout_change, len(bout)]):
+        if hi - lo < 2:
+            continue
+        t0, t1 = t_step[lo], t_step[hi - 1]
+        idx = np.flatnonzero(good & (tg >= t0) & (tg <= t1))
+        if len(idx) < 2:
+            continue
+        count = np.interp(tg[idx], t_step[lo:hi], np.arange(hi - lo, dtype=float))
+        a = 0
+        while a < len(idx) - 1:
+            # the first fix at least segment_steps after A (or the last one of the bout)
+            after = np.flatnonzero(count[a + 1:] - count[a] >= segment_steps)
+            b = a + 1 + (after[0] if len(after) else len(idx) - 2 - a)
+            ia, ib = idx[a], idx[b]
+            n = count[b] - count[a]
+            k_first = lo + int(np.floor(count[a])) + 1
+            k_last = lo + int(np.floor(count[b]))
+            hd = heading[k_first:k_last + 1]
+            if len(hd) and np.isfinite(hd).all():
+                straight = float(np.abs(np.exp(1j * hd).mean()))
+            else:
+                straight = 1.0
+            dist = float(np.hypot(eg[ib] - eg[ia], ng[ib] - ng[ia]))
+            meas = dist / (n * straight) if n > 0 and straight > 0 else np.nan
+            if n < min_segment_steps:
+                reason = f"fewer than {min_segment_steps:g} steps"
+            elif straight < min_straightness:
+                reason = f"not straight ({straight:.2f} < {min_straightness:g})"
+            elif not (min_step_m <= meas <= max_step_m):
+                reason = f"implausible step {meas:.2f} m"
+            else:
+                reason = ""
+            rows.append((tg[ia], tg[ib], n, dist, straight, float(np.sqrt((h_acc[ia] ** 2 + h_acc[ib] ** 2) / 2)),
+                         meas, k_first, k_last, reason == "", reason))
+            a = b
+    if not rows:
+        return empty
+    out = pd.DataFrame(rows, columns=list(SEGMENT_COLUMNS))
+    return out.astype({"k_first": int, "k_last": int, "used": bool})

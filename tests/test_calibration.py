@@ -1,0 +1,184 @@
+"""Step-length calibration: recursive prediction, the adaptive Kalman filter with GNSS segments, `pdr calibrate`."""
+
+from __future__ import annotations
+
+import json
+import warnings
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from pdr.calibration import AdaptiveKalmanCalibration, RecursiveStepCalibration, gnss_segments
+from pdr.cli.main import main
+from pdr.constants import GRAVITY_MPS2
+from pdr.errors import InputError
+from pdr.io.recording import Recording, save_recording
+from pdr.step_length import RegressionStepLength, load_model
+
+
+def true_length(freq: np.ndarray, slope: float = 0.9) -> np.ndarray:
+    """A walker whose step length follows a power law of cadence (richer than the linear model)."""
+    return 0.74 * (freq / 1.8) ** slope
+
+
+def synthetic_walk(freq: np.ndarray, *, h_acc_m: float, seed: int, length_scale: float = 1.0,
+                   turn_rate_rad_per_step: float = 0.0):
+    """Steps table + GNSS (1 Hz) of a walk with the given per-step cadence; returns (steps, gnss, true lengths)."""
+    rng = np.random.default_rng(seed)
+    length = length_scale * true_length(freq) + 0.03 * rng.standard_normal(len(freq))
+    t = np.cumsum(1.0 / freq)
+    heading = 0.4 + turn_rate_rad_per_step * np.arange(len(freq)) + 0.02 * rng.standard_normal(len(freq))
+    e = np.cumsum(length * np.cos(heading))
+    n = np.cumsum(length * np.sin(heading))
+    steps = pd.DataFrame({"t_s": t, "bout_id": 0, "step_freq_hz": freq + 0.03 * rng.standard_normal(len(freq)),
+                          "acc_var_m2ps4": 3.0 + 2.0 * (freq - 1.8) + 0.3 * rng.standard_normal(len(freq)),
+                          "heading_rad": heading})
+    tg = np.arange(np.ceil(t[0]), t[-1], 1.0)
+    gnss = pd.DataFrame({"t_s": tg, "e_m": np.interp(tg, t, e) + h_acc_m * rng.standard_normal(len(tg)),
+                         "n_m": np.interp(tg, t, n) + h_acc_m * rng.standard_normal(len(tg)), "h_acc_m": h_acc_m})
+    return steps, gnss, length
+
+
+CONSTANT = RegressionStepLength(a_m=0.70, b_m_per_hz=0.0, c_m_per_m2ps4=0.0, residual_std_m=0.05,
+                                covariance=np.diag([0.1 ** 2, 1e-12, 1e-12]).tolist())
+
+
+def test_akf_converges_within_100_steps_after_a_change_of_pace():
+    freq = np.r_[np.full(300, 1.7), np.full(300, 2.0), np.full(300, 1.6)]
+    steps, gnss, _ = synthetic_walk(freq, h_acc_m=0.05, seed=1)
+    akf = AdaptiveKalmanCalibration().fit(steps, gnss, CONSTANT)  # the paper's filter: the model says nothing
+    err = np.abs(akf.trace_["step_length_m"].to_numpy() - true_length(freq))
+    for change in (300, 600):
+        after = err[change:change + 300]
+        converged = np.flatnonzero(after > 0.03).max() + 1
+        assert converged <= 100, (change, converged)
+        assert after[:10].max() > 0.08  # the change was real: the filter had to move
+    # the process noise adapted: larger right after a change than in steady walking
+    q = akf.trace_["process_std_m"].to_numpy()
+    assert q[300:400].max() > 3 * np.median(q[150:300])
+
+
+def test_recursive_prediction_lags_one_window():
+    pred_model = RegressionStepLength(a_m=0.0, b_m_per_hz=0.4, c_m_per_m2ps4=0.0, residual_std_m=0.05)
+    freq = np.r_[np.full(40, 1.7), np.full(60, 2.0)]
+    steps = pd.DataFrame({"step_freq_hz": freq, "acc_var_m2ps4": 3.0})
+    rc = RecursiveStepCalibration(window_steps=20).estimate(steps, pred_model)
+    np.testing.assert_allclose(rc.window_step_m_, [0.68, 0.68, 0.68, 0.80, 0.80])
+    assert rc.step_length_m_.shape == (100,) and np.all(rc.step_length_std_m_ > 0)
+    assert rc.step_length_std_m_[40:60].min() > 0.1  # the window after the change carries its lag as uncertainty
+    with pytest.raises(InputError, match="window_steps"):
+        RecursiveStepCalibration(window_steps=0).estimate(steps, pred_model)
+
+
+def test_single_frequency_updates_a_only():
+    freq = np.full(600, 1.85)
+    steps, gnss, length = synthetic_walk(freq, h_acc_m=1.0, seed=2, length_scale=1.12)
+    prior = RegressionStepLength.population()
+    akf = AdaptiveKalmanCalibration().fit(steps, gnss, prior)
+    assert akf.updated_ == "a_m"
+    m = akf.model_
+    assert (m.b_m_per_hz, m.c_m_per_m2ps4) == (prior.b_m_per_hz, prior.c_m_per_m2ps4)
+    assert m.a_m != prior.a_m
+    est = m.estimate(steps).step_length_m_
+    assert abs(est.sum() / length.sum() - 1) < 0.02
+    assert abs(prior.estimate(steps).step_length_m_.sum() / length.sum() - 1) > 0.05
+
+
+def test_several_frequencies_update_all_and_generalise():
+    freq = np.repeat([1.6, 1.75, 1.9, 2.05, 1.7, 1.95], 150)
+    steps, gnss, _ = synthetic_walk(freq, h_acc_m=1.0, seed=3, length_scale=1.08)
+    akf = AdaptiveKalmanCalibration().fit(steps, gnss, RegressionStepLength.population())
+    assert akf.updated_ == "all"
+    assert akf.segments_["used"].sum() >= 30 and akf.distance_m_ > 400
+    # a new walk of the same user at other paces
+    test_freq = np.repeat([1.65, 2.0, 1.8], 200)
+    test_steps, _, test_len = synthetic_walk(test_freq, h_acc_m=1.0, seed=4, length_scale=1.08)
+    est = akf.model_.estimate(test_steps).step_length_m_
+    assert abs(est.sum() / test_len.sum() - 1) < 0.01
+    cov = np.asarray(akf.model_.covariance)
+    assert np.all(np.diag(cov) < np.diag(np.asarray(RegressionStepLength.population().covariance)))
+
+
+def test_gates_reject_poor_fixes_curves_and_pauses():
+    freq = np.full(300, 1.8)
+    steps, gnss, _ = synthetic_walk(freq, h_acc_m=0.5, seed=5)
+    poor = gnss.assign(h_acc_m=25.0)
+    with pytest.warns(UserWarning, match="no GNSS segment"):
+        akf = AdaptiveKalmanCalibration().fit(steps, poor, CONSTANT)
+    assert akf.updated_ == "none" and len(akf.segments_) == 0
+    assert akf.model_.get_params() == CONSTANT.get_params()
+    # a walk in circles: every segment curves
+    curvy, gnss_c, _ = synthetic_walk(freq, h_acc_m=0.5, seed=6, turn_rate_rad_per_step=0.12)
+    segs = gnss_segments(curvy, gnss_c, segment_steps=20, min_segment_steps=8, max_h_acc_m=10, assumed_h_acc_m=5,
+                         min_straightness=0.9, min_step_m=0.2, max_step_m=1.6)
+    assert len(segs) > 5 and not segs["used"].any() and segs["reason"].str.startswith("not straight").all()
+    # NaN fixes are skipped, fixes outside the walking bouts give no segment
+    holes = gnss.copy()
+    holes.loc[::3, ["e_m", "n_m"]] = np.nan
+    two_bouts = steps.assign(bout_id=(np.arange(len(steps)) >= 150).astype(int))
+    segs = gnss_segments(two_bouts, holes, segment_steps=20, min_segment_steps=8, max_h_acc_m=10, assumed_h_acc_m=5,
+                         min_straightness=0.9, min_step_m=0.2, max_step_m=1.6)
+    t_split = (steps.t_s[149] + steps.t_s[150]) / 2
+    assert segs["used"].sum() > 5
+    assert not ((segs.t_start_s < t_split) & (segs.t_end_s > t_split)).any()
+
+
+def test_bad_gnss_and_steps_input():
+    steps, gnss, _ = synthetic_walk(np.full(100, 1.8), h_acc_m=0.5, seed=7)
+    akf = AdaptiveKalmanCalibration()
+    with pytest.raises(InputError, match="t_s, e_m, n_m"):
+        akf.fit(steps, gnss.rename(columns={"e_m": "x"}), CONSTANT)
+    with pytest.raises(InputError, match="strictly increasing"):
+        akf.fit(steps, gnss.iloc[::-1], CONSTANT)
+    with pytest.raises(InputError, match="h_acc_m > 0"):
+        akf.fit(steps, gnss.assign(h_acc_m=0.0), CONSTANT)
+    with pytest.raises(InputError, match="steps t_s"):
+        akf.fit(steps.iloc[::-1], gnss, CONSTANT)
+    with pytest.raises(InputError, match="as many GNSS"):
+        akf.fit([steps, steps], [gnss], CONSTANT)
+    with pytest.raises(InputError, match="segment_steps"):
+        AdaptiveKalmanCalibration(segment_steps=0).fit(steps, gnss, CONSTANT)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        empty = akf.fit(steps.iloc[:0], gnss, CONSTANT)
+    assert empty.updated_ == "none" and empty.step_length_m_.shape == (0,)
+
+
+def walking_recording(path, *, duration_s: float, speed_mps: float, with_gnss: bool = True):
+    """A hand-made waist recording: vertical bounce at 1.8 steps/s, no rotation, GNSS along a straight line."""
+    rate, f = 100.0, 1.8
+    t = np.arange(0.0, duration_s, 1.0 / rate)
+    ramp = np.clip(t / 2.0, 0, 1) * np.clip((duration_s - t) / 2.0, 0, 1)
+    vert = GRAVITY_MPS2 + ramp * (2.5 * np.sin(2 * np.pi * f * t) + 0.6 * np.sin(4 * np.pi * f * t + 0.5))
+    fwd = ramp * 1.0 * np.sin(2 * np.pi * f * t + 1.0)
+    imu = pd.DataFrame({"t_s": t, "acc_x_mps2": fwd, "acc_y_mps2": 0.0 * t, "acc_z_mps2": vert,
+                        "gyr_x_radps": 0.0 * t, "gyr_y_radps": 0.0 * t, "gyr_z_radps": 0.0 * t})
+    gnss = None
+    if with_gnss:
+        tg = np.arange(0.0, duration_s, 1.0)
+        gnss = pd.DataFrame({"t_s": tg, "e_m": speed_mps * tg, "n_m": 0.0 * tg, "h_acc_m": 0.5})
+    rec = Recording(meta={"recording": {"id": path.name, "placement": "waist"}, "subject": {"height_m": 1.8}},
+                    imu=imu, gnss=gnss)
+    return save_recording(rec, path)
+
+
+def test_cli_calibrate_writes_a_model_run_can_use(tmp_path, capsys):
+    rec = walking_recording(tmp_path / "walk", duration_s=60.0, speed_mps=1.44)  # 0.8 m steps at 1.8 Hz
+    out = tmp_path / "model.json"
+    assert main(["calibrate", str(rec), "-o", str(out)]) == 0
+    line = capsys.readouterr().out
+    assert "calibrated regression model" in line and str(out) in line
+    doc = json.loads(out.read_text())
+    assert doc["pdr_model_version"] == 1 and doc["info"]["n_steps"] > 40 and doc["info"]["distance_m"] > 30
+    model = load_model(out)
+    assert model.estimate(pd.DataFrame({"step_freq_hz": [1.8], "acc_var_m2ps4": [3.0]})).step_length_m_[0] == \
+        pytest.approx(0.8, abs=0.04)
+
+
+def test_cli_calibrate_needs_gnss(tmp_path, capsys):
+    rec = walking_recording(tmp_path / "nognss", duration_s=20.0, speed_mps=1.4, with_gnss=False)
+    assert main(["calibrate", str(rec), "-o", str(tmp_path / "m.json")]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("error:") and "needs GNSS" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "m.json").exists()
