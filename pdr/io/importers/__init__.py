@@ -37,5 +37,6 @@ def import_recordings(fmt: str, src: Path, dest: Path, *, rate_hz: float | None 
     src, dest = Path(src), Path(dest)
     if not src.exists():
         raise InputError(f"{src}: expected a {fmt} source (file or folder), found nothing there")
+    src = src.resolve()  # recordings are named after the source: "." or ".." must give the real folder name
     module = importlib.import_module(f"pdr.io.importers.{fmt}")
     return module.import_source(src, dest, rate_hz=rate_hz, force=force)

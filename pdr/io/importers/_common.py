@@ -7,6 +7,7 @@ none of the output folders exists (unless ``force``), and only then writes them 
 from __future__ import annotations
 
 import contextlib
+import re
 import stat
 import tempfile
 import warnings
@@ -25,6 +26,7 @@ MAX_ZIP_TOTAL_BYTES = 2 * 1024**3  # at most 2 GiB uncompressed in total
 MAX_ZIP_RATIO = 200.0  # at most 200x compression per member (text CSV compresses 5-20x)
 MAX_ZIP_MEMBERS = 10_000
 _COPY_CHUNK_BYTES = 1 << 20
+_SAFE_ID = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,127}")
 
 
 def require_file(path: Path, what: str) -> Path:
@@ -222,6 +224,9 @@ def write_recordings(recordings: list[Recording], dest: Path, *, force: bool) ->
     if dest.exists() and not dest.is_dir():
         raise InputError(f"{dest}: expected a destination folder, found a file")
     for rec in recordings:
+        if not _SAFE_ID.fullmatch(rec.id):
+            raise InputError(f"{rec.id!r}: expected a recording name of letters, digits, '.', '_' and '-' (it names a folder), "
+                             "found other characters; rename the source")
         what = f"{rec.id}/imu.csv"
         validate_imu(rec.imu, what)
         for placement, df in rec.extra_imus.items():
@@ -283,3 +288,9 @@ def resample_mean(t_new: np.ndarray, t: np.ndarray, values: np.ndarray, rate_hz:
         v0, v1 = values[i], values[i + 1]
         return cum[i] + (x - t[i])[:, None] * (v0 + 0.5 * frac * (v1 - v0))
     return (integral(hi) - integral(lo)) / h
+
+
+def safe_id(name: str) -> str:
+    """A recording id / folder name from a source's name: letters, digits, '-', '_', '.' only."""
+    out = re.sub(r"[^A-Za-z0-9._-]+", "_", name).strip("._-")[:128]
+    return out or "recording"

@@ -3,7 +3,6 @@ and the GNSS table with its geo origin."""
 
 from __future__ import annotations
 
-import re
 import warnings
 from typing import Any
 
@@ -77,9 +76,3 @@ def gnss_table(t: np.ndarray, lat: np.ndarray, lon: np.ndarray, alt: np.ndarray 
         first = int(np.flatnonzero(valid)[0])
         geo = {"origin_lat_deg": float(df["lat_deg"].iloc[first]), "origin_lon_deg": float(df["lon_deg"].iloc[first])}
     return df, geo
-
-
-def safe_id(name: str) -> str:
-    """A recording id / folder name from an export's name: letters, digits, '-', '_', '.' only."""
-    out = re.sub(r"[^A-Za-z0-9._-]+", "_", name).strip("._")
-    return out or "recording"

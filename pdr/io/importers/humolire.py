@@ -34,7 +34,7 @@ import pandas as pd
 
 from pdr.errors import InputError
 from pdr.io.importers._common import (
-    imu_frame, numeric_array, read_table, require_dir, require_file, require_finite, resample_mean, uniform_grid,
+    imu_frame, numeric_array, read_table, require_dir, require_file, require_finite, resample_mean, safe_id, uniform_grid,
     write_recordings,
 )
 from pdr.io.recording import Recording
@@ -163,7 +163,7 @@ def import_source(src: Path, dest: Path, *, rate_hz: float | None = None, force:
         "loop_closure": bool(len(points) and np.linalg.norm(points[-1] - np.asarray(start)) < LOOP_CLOSURE_TOLERANCE_M),
         "distance_source": "polyline from the starting position through the landmarks (keypoints.json)",
     }
-    meta: dict[str, Any] = {"recording": {"id": src.name, "placement": "hand", "source": "humolire",
+    meta: dict[str, Any] = {"recording": {"id": safe_id(src.name), "placement": "hand", "source": "humolire",
                                           "start_unix_s": _start_unix_s(src),
                                           "resampled_hz": RESAMPLE_RATE_HZ}}
     subject = _subject(src)

@@ -25,7 +25,7 @@ import pandas as pd
 
 from pdr.errors import InputError
 from pdr.io.importers._common import (
-    imu_frame, increasing_mask, numeric_array, read_table, require_finite, steady_clock, write_recordings,
+    imu_frame, increasing_mask, numeric_array, read_table, require_finite, safe_id, steady_clock, write_recordings,
 )
 from pdr.io.recording import Recording
 
@@ -121,7 +121,7 @@ def _optimisation_folder(folder: Path) -> Recording:
     step_ns = np.sort(np.concatenate(rises))
     parts = folder.name.split("_")
     position = parts[3] if len(parts) >= 5 else folder.name
-    meta = {"recording": {"id": folder.name, "placement": _placement(position, what), "source": "oxford"}}
+    meta = {"recording": {"id": safe_id(folder.name), "placement": _placement(position, what), "source": "oxford"}}
     reference = {
         "steps": pd.DataFrame({"t_s": (step_ns - t0) / NS_PER_S}),
         "summary": {"n_steps": int(len(step_ns)), "steps_source": "foot ground-truth device (0 -> 1 transitions of either foot)"},

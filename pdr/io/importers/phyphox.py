@@ -30,8 +30,8 @@ import numpy as np
 import pandas as pd
 
 from pdr.errors import InputError
-from pdr.io.importers._common import numeric_array, read_table, source_folder, write_recordings
-from pdr.io.importers._phone import Series, clean_series, combine_imu, gnss_table, safe_id
+from pdr.io.importers._common import numeric_array, read_table, safe_id, source_folder, write_recordings
+from pdr.io.importers._phone import Series, clean_series, combine_imu, gnss_table
 from pdr.io.recording import Recording
 
 _COLUMN = re.compile(r"^(?P<label>.*?)\s*\((?P<unit>[^()]*)\)\s*$")

@@ -30,9 +30,9 @@ import pandas as pd
 
 from pdr.errors import InputError
 from pdr.io.importers._common import (
-    find_export_root, interp_columns, numeric_array, read_table, source_folder, write_recordings,
+    find_export_root, interp_columns, numeric_array, read_table, safe_id, source_folder, write_recordings,
 )
-from pdr.io.importers._phone import Series, clean_series, combine_imu, gnss_table, safe_id
+from pdr.io.importers._phone import Series, clean_series, combine_imu, gnss_table
 from pdr.io.recording import Recording
 
 NS_PER_S = 1e9

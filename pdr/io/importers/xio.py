@@ -21,7 +21,7 @@ import numpy as np
 from pdr.constants import GRAVITY_MPS2
 from pdr.errors import InputError
 from pdr.io.importers._common import (
-    imu_frame, increasing_mask, numeric_array, read_table, require_finite, steady_clock, write_recordings,
+    imu_frame, increasing_mask, numeric_array, read_table, require_finite, safe_id, steady_clock, write_recordings,
 )
 from pdr.io.recording import Recording
 
@@ -76,7 +76,7 @@ def import_source(src: Path, dest: Path, *, rate_hz: float | None = None, force:
     t_s, stacked = steady_clock(t_s, np.hstack([signals[s] for s in order]), what)
     signals = {s: stacked[:, 3 * k:3 * k + 3] for k, s in enumerate(order)}
     imu = imu_frame(t_s, signals["accelerometer"], signals.get("gyroscope"), signals.get("magnetometer"))
-    meta = {"recording": {"id": src.stem, "placement": "foot_right", "placement_assumed": True, "source": "xio"}}
+    meta = {"recording": {"id": safe_id(src.stem), "placement": "foot_right", "placement_assumed": True, "source": "xio"}}
     reference = {"summary": {"loop_closure": True, "final_displacement_m": 0.0, "distance_m": LOOP_DISTANCE_M,
                              "distance_approximate": True}}
     return write_recordings([Recording(meta=meta, imu=imu, reference=reference)], dest, force=force)
