@@ -491,3 +491,54 @@ def test_cli_prints_one_path_per_recording(tmp_path, capsys):
         rc, out, err = _cli(["import", "gaitmap", GAITMAP, tmp_path, "--rate-hz", "204.8"], capsys)
     assert rc == 0
     assert out.split() == [str(tmp_path / n) for n in ("walk_2x20m", "stairs_up", "stairs_down")]
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Helpers: clock repair and resampling
+# ---------------------------------------------------------------------------------------------------------------
+
+
+def test_wild_jitter_is_resampled_with_a_warning_and_steady_clock_is_kept():
+    t = np.cumsum(np.tile([0.001, 0.009], 200))  # interquartile ratio 9: "varies wildly"
+    values = np.column_stack([np.sin(t), 2 * t])
+    with pytest.warns(UserWarning, match="resampled linearly to a uniform 200 Hz grid"):
+        t_new, v_new = _common.steady_clock(t, values, "x")
+    np.testing.assert_allclose(np.diff(t_new), 0.005)
+    np.testing.assert_allclose(v_new[:, 1], 2 * t_new, atol=1e-12)
+    t_ok = np.arange(100) * 0.01 + np.tile([0.0, 0.002], 50)  # mild jitter: kept as recorded
+    same_t, same_v = _common.steady_clock(t_ok, t_ok[:, None], "x")
+    assert same_t is t_ok
+
+
+def test_resample_mean_is_the_window_average():
+    rng = np.random.default_rng(1)
+    t = np.cumsum(rng.uniform(0.001, 0.004, 2000))
+    grid = _common.uniform_grid(t[0] + 0.01, t[-1] - 0.01, 100.0)
+    out = _common.resample_mean(grid, t, np.column_stack([np.full_like(t, 3.0), 5 * t]), 100.0)
+    np.testing.assert_allclose(out[:, 0], 3.0)
+    np.testing.assert_allclose(out[:, 1], 5 * grid, rtol=1e-12)  # the mean of a line over a centred window
+
+
+def test_increasing_mask_drops_repeats_and_back_steps():
+    t = np.array([0.0, 0.1, 0.1, 0.2, 0.15, 0.3])
+    with pytest.warns(UserWarning, match="dropped 2 sample"):
+        keep = _common.increasing_mask(t, "x")
+    assert keep.tolist() == [True, True, False, True, False, True]
+
+
+def test_phyphox_unsorted_time_repaired(tmp_path):
+    src = tmp_path / "exp"
+    src.mkdir()
+    lines = (HAND / "phyphox_multi" / "Accelerometer.csv").read_text().splitlines()
+    lines.insert(40, lines[38])  # a row that steps back in time
+    (src / "Accelerometer.csv").write_text("\n".join(lines) + "\n")
+    paths, messages = _import("phyphox", src, tmp_path / "out")
+    rec = load_recording(paths[0])
+    assert any("dropped 1 sample" in m for m in messages) and len(rec.imu) == 150
+
+
+def test_oxford_optimisation_position_from_folder_name(tmp_path):
+    src = tmp_path / "Pixel_Ann_Carpet_InHand_2"
+    shutil.copytree(OXFORD / "optimisation" / "data" / "Samsung_Carmelo_Hard_Purse_1", src)
+    rec = load_recording(_import("oxford", src, tmp_path / "out")[0][0])
+    assert rec.id == "Pixel_Ann_Carpet_InHand_2" and rec.placement == "hand"

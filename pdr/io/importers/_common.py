@@ -121,15 +121,6 @@ def interp_columns(t_new: np.ndarray, t: np.ndarray, values: np.ndarray) -> np.n
     return np.column_stack([np.interp(t_new, t, values[:, j]) for j in range(values.shape[1])])
 
 
-def median_rate_hz(t: np.ndarray) -> float:
-    return float(1.0 / np.median(np.diff(t)))
-
-
-def nice_rate_hz(t: np.ndarray) -> float:
-    """The median rate rounded to a whole number of hertz (a uniform grid for resampling irregular phone clocks)."""
-    return float(max(1.0, round(median_rate_hz(t))))
-
-
 # ----------------------------------------------------------------------------------------------------------------
 # Zip archives
 # ----------------------------------------------------------------------------------------------------------------
@@ -255,13 +246,14 @@ def imu_frame(t_s: np.ndarray, acc_mps2: np.ndarray, gyr_radps: np.ndarray | Non
 
 def steady_clock(t: np.ndarray, values: np.ndarray, what: str) -> tuple[np.ndarray, np.ndarray]:
     """Return ``(t, values)`` unchanged when the rate is steady enough for the validator; otherwise resample them
-    linearly onto a uniform grid at the median rate (rounded to 1 Hz) and warn. Only wild jitter (interquartile ratio
+    linearly onto a uniform grid at the mean rate (rounded to 1 Hz; the median of a wildly varying clock can be any
+    of its modes) and warn. Only wild jitter (interquartile ratio
     of the sample intervals above ``MAX_DT_SPREAD``) is resampled."""
     dt = np.diff(t)
     q25, q75 = np.percentile(dt, [25, 75])
     if q25 > 0 and q75 / q25 <= MAX_DT_SPREAD:
         return t, values
-    rate = nice_rate_hz(t)
+    rate = float(max(1.0, round((len(t) - 1) / (t[-1] - t[0]))))
     grid = uniform_grid(t[0], t[-1], rate)
     warnings.warn(f"{what}: sample intervals vary wildly (interquartile {q25 * 1e3:.2f} to {q75 * 1e3:.2f} ms); "
                   f"resampled linearly to a uniform {rate:g} Hz grid", stacklevel=3)
