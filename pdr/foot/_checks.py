@@ -1,0 +1,79 @@
+"""Input checks shared by the foot algorithms: a canonical IMU table with gyroscope, saturation, pairs of feet."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pandas as pd
+
+from pdr.errors import InputError
+from pdr.io.recording import ACC_COLUMNS, GYR_COLUMNS, check_time
+
+MIN_SAMPLES = 20
+
+
+def foot_imu_arrays(imu: pd.DataFrame, what: str = "foot IMU") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(t_s, acc_mps2 (N,3), gyr_radps (N,3))`` of a canonical IMU table; InputError when it cannot be a foot IMU."""
+    if not isinstance(imu, pd.DataFrame):
+        raise InputError(f"{what}: expected a pandas DataFrame with t_s, acc_*_mps2, gyr_*_radps, found {type(imu).__name__}")
+    missing = [c for c in ("t_s", *ACC_COLUMNS, *GYR_COLUMNS) if c not in imu.columns]
+    if missing:
+        raise InputError(f"{what}: expected columns t_s, acc_*_mps2 and gyr_*_radps (a foot IMU needs the gyroscope), "
+                         f"missing {', '.join(missing)}")
+    t = imu["t_s"].to_numpy(dtype=float)
+    check_time(t, what, min_rows=2)
+    acc = imu[list(ACC_COLUMNS)].to_numpy(dtype=float)
+    gyr = imu[list(GYR_COLUMNS)].to_numpy(dtype=float)
+    if not (np.isfinite(acc).all() and np.isfinite(gyr).all()):
+        raise InputError(f"{what}: expected finite acceleration and angular rate, found NaN/inf samples")
+    return t, acc, gyr
+
+
+def saturated_samples(values: np.ndarray, *, min_run: int = 3, min_abs: float = 0.0) -> np.ndarray:
+    """Samples where a channel sits at its own extreme value for ``min_run`` or more samples in a row (clipping).
+
+    A real signal touches its maximum for one sample; a saturated sensor stays there. Returns a bool mask (N,).
+    """
+    mask = np.zeros(len(values), dtype=bool)
+    for ch in range(values.shape[1]):
+        x = values[:, ch]
+        for extreme in (x.max(), x.min()):
+            if abs(extreme) <= min_abs:
+                continue
+            at = np.isclose(x, extreme, rtol=0.0, atol=1e-9 * max(1.0, abs(extreme)))
+            if at.sum() < min_run:
+                continue
+            # runs of consecutive True
+            edges = np.diff(np.r_[0, at.astype(np.int8), 0])
+            starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+            for s, e in zip(starts, ends):
+                if e - s >= min_run:
+                    mask[s:e] = True
+    return mask
+
+
+def check_pair(left: pd.DataFrame, right: pd.DataFrame, *, max_offset_s: float = 0.5, max_length_ratio: float = 1.2) -> None:
+    """Left and right foot IMUs must share one clock (CONTRACT.md): InputError when they clearly do not."""
+    tl, tr = left["t_s"].to_numpy(dtype=float), right["t_s"].to_numpy(dtype=float)
+    if len(tl) < 2 or len(tr) < 2:
+        return
+    dl, dr = tl[-1] - tl[0], tr[-1] - tr[0]
+    overlap = min(tl[-1], tr[-1]) - max(tl[0], tr[0])
+    if overlap <= 0:
+        raise InputError(
+            f"left/right foot IMUs: expected one shared clock, found disjoint time spans "
+            f"(left {tl[0]:.3f}-{tl[-1]:.3f} s, right {tr[0]:.3f}-{tr[-1]:.3f} s)"
+        )
+    if max(dl, dr) > max_length_ratio * min(dl, dr) or abs(tl[0] - tr[0]) > max_offset_s + 0.5 * max(dl, dr):
+        raise InputError(
+            f"left/right foot IMUs: expected one shared clock and about the same span, found left "
+            f"{tl[0]:.3f}-{tl[-1]:.3f} s ({len(tl)} samples) and right {tr[0]:.3f}-{tr[-1]:.3f} s ({len(tr)} samples)"
+        )
+    if abs(tl[0] - tr[0]) > max_offset_s or abs(tl[-1] - tr[-1]) > max_offset_s:
+        warnings.warn(
+            f"left/right foot IMUs start or end more than {max_offset_s:g} s apart (left {tl[0]:.3f}-{tl[-1]:.3f} s, "
+            f"right {tr[0]:.3f}-{tr[-1]:.3f} s); only the overlap {max(tl[0], tr[0]):.3f}-{min(tl[-1], tr[-1]):.3f} s "
+            f"is combined by the double-feet calibration",
+            stacklevel=3,
+        )
