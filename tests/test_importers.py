@@ -520,10 +520,12 @@ def test_resample_mean_is_the_window_average():
 
 
 def test_increasing_mask_drops_repeats_and_back_steps():
-    t = np.array([0.0, 0.1, 0.1, 0.2, 0.15, 0.3])
+    t = np.r_[0.0, 0.1, 0.1, 0.2, 0.15, 0.3, np.arange(0.4, 10.0, 0.1)]
     with pytest.warns(UserWarning, match="dropped 2 sample"):
         keep = _common.increasing_mask(t, "x")
-    assert keep.tolist() == [True, True, False, True, False, True]
+    assert keep[:6].tolist() == [True, True, False, True, False, True] and keep[6:].all()
+    with pytest.raises(InputError, match="clock jump or an unsorted file"):
+        _common.increasing_mask(np.r_[np.arange(50.0), 1000.0, np.arange(50.0, 100.0)], "x")
 
 
 def test_phyphox_unsorted_time_repaired(tmp_path):

@@ -26,6 +26,8 @@ MAX_ZIP_TOTAL_BYTES = 2 * 1024**3  # at most 2 GiB uncompressed in total
 MAX_ZIP_RATIO = 200.0  # at most 200x compression per member (text CSV compresses 5-20x)
 MAX_ZIP_MEMBERS = 10_000
 _COPY_CHUNK_BYTES = 1 << 20
+MAX_DROPPED_FRACTION = 0.05  # repeated / back-stepping time stamps repaired by dropping; more is an error
+MAX_DROPPED_ALWAYS_REPAIRED = 10  # ...except in short files (a GPX track of a few points)
 _SAFE_ID = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,127}")
 
 
@@ -95,7 +97,9 @@ def increasing_mask(t: np.ndarray, what: str, *, row_offset: int = 0) -> np.ndar
     """Keep the samples whose time is later than every earlier sample; warn about what is dropped.
 
     A source clock that repeats or steps back (the x-io CSV, a few duplicated rows of the Oxford files) is repaired
-    this way, never passed on (CONTRACT.md).
+    this way, never passed on (CONTRACT.md). When more than ``MAX_DROPPED_FRACTION`` of the samples (and more than
+    ``MAX_DROPPED_ALWAYS_REPAIRED``) would go, the
+    clock did not stutter but jumped (or the file is unsorted): that is an InputError, not a repair that loses data.
     """
     if len(t) == 0:
         return np.zeros(0, dtype=bool)
@@ -104,6 +108,10 @@ def increasing_mask(t: np.ndarray, what: str, *, row_offset: int = 0) -> np.ndar
     n_drop = int((~keep).sum())
     if n_drop:
         first = int(np.flatnonzero(~keep)[0])
+        if n_drop > max(MAX_DROPPED_FRACTION * len(t), MAX_DROPPED_ALWAYS_REPAIRED):
+            raise InputError(f"{what}: expected increasing time stamps (a few repeats are repaired), found {n_drop} of "
+                             f"{len(t)} samples at or before an earlier time, from data row {first + 1 + row_offset} "
+                             "(a clock jump or an unsorted file)")
         warnings.warn(f"{what}: dropped {n_drop} sample(s) whose time repeats or steps back "
                       f"(the first at data row {first + 1 + row_offset})", stacklevel=3)
     return keep
