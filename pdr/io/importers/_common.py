@@ -98,8 +98,8 @@ def increasing_mask(t: np.ndarray, what: str, *, row_offset: int = 0) -> np.ndar
 
     A source clock that repeats or steps back (the x-io CSV, a few duplicated rows of the Oxford files) is repaired
     this way, never passed on (CONTRACT.md). When more than ``MAX_DROPPED_FRACTION`` of the samples (and more than
-    ``MAX_DROPPED_ALWAYS_REPAIRED``) would go, the
-    clock did not stutter but jumped (or the file is unsorted): that is an InputError, not a repair that loses data.
+    ``MAX_DROPPED_ALWAYS_REPAIRED``) would go, the clock did not stutter but jumped (or the file is unsorted): that is
+    an InputError, not a repair that loses data.
     """
     if len(t) == 0:
         return np.zeros(0, dtype=bool)
