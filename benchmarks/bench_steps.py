@@ -57,8 +57,21 @@ def oxford_recordings() -> list[tuple[str, pd.DataFrame, np.ndarray, float]]:
     return out
 
 
-def mobgap_trials() -> list[tuple[str, pd.DataFrame, np.ndarray, list[tuple[float, float]]]]:
-    """(name, imu, INDIP initial contacts (s), INDIP walking bouts) of the trials that have a reference."""
+def _ics(standard, table: str) -> tuple[np.ndarray, list[tuple[float, float]]]:
+    ics, bouts = [], []
+    for wb in np.atleast_1d(getattr(standard, table, [])) if standard is not None else []:
+        ics += list(np.atleast_1d(wb.InitialContact_Event).astype(float))
+        bouts.append((float(wb.Start), float(wb.End)))
+    ics = np.asarray(ics, float)
+    return np.sort(ics[np.isfinite(ics)]), bouts
+
+
+def mobgap_trials() -> list[tuple[str, pd.DataFrame, np.ndarray, list[tuple[float, float]], np.ndarray]]:
+    """(name, imu, INDIP initial contacts (s), INDIP walking bouts, union ICs) of the trials with a reference.
+
+    The union adds the Stereophoto micro-bout ICs farther than the tolerance from every INDIP IC: INDIP misses
+    some walking that the motion capture saw (HA/001 Test11 131-134 s, HA/002 Test11 142-147 s, HA/002 Test5).
+    """
     out = []
     for part in sorted((_data("mobgap_lowerback_tvs_lab") / "lab" / "HA").iterdir()):
         tm = sio.loadmat(part / "data.mat", squeeze_me=True, struct_as_record=False)["data"].TimeMeasure1
@@ -69,15 +82,15 @@ def mobgap_trials() -> list[tuple[str, pd.DataFrame, np.ndarray, list[tuple[floa
                 fs = float(lb.Fs.Acc) if hasattr(lb.Fs, "Acc") else float(lb.Fs)
                 acc = np.asarray(lb.Acc, float) * GRAVITY_MPS2
                 gyr = np.radians(np.asarray(lb.Gyr, float))
-                ics, bouts = [], []
                 indip = getattr(r.Standards, "INDIP", None)
-                for wb in np.atleast_1d(getattr(indip, "ContinuousWalkingPeriod", [])):
-                    ics += list(np.atleast_1d(wb.InitialContact_Event).astype(float))
-                    bouts.append((float(wb.Start), float(wb.End)))
-                ics = np.asarray(ics)
-                ics = ics[np.isfinite(ics)]
-                if len(ics):
-                    out.append((f"{part.name}/{test}/{trial}", _imu(np.arange(len(acc)) / fs, acc, gyr), ics, bouts))
+                ics, bouts = _ics(indip, "ContinuousWalkingPeriod")
+                union = list(_ics(indip, "MicroWB")[0])
+                for x in _ics(getattr(r.Standards, "Stereophoto", None), "MicroWB")[0]:
+                    if all(abs(x - y) > TOL_S for y in union):
+                        union.append(x)
+                if len(union):
+                    out.append((f"{part.name}/{test}/{trial}", _imu(np.arange(len(acc)) / fs, acc, gyr), ics, bouts,
+                                np.sort(union)))
     return out
 
 
@@ -124,21 +137,21 @@ def run(quick: bool = False) -> list[dict]:
                              "Salvi et al. 2018 app"))
     rows.append(_row("oxford/all", "max |count error| wavelet", max(errs), "%", "<= 2", BRAJDIC))
 
-    tot = np.zeros(3, int)
-    tot_in = np.zeros(3, int)
-    for name, imu, ics, bouts in mobgap_trials()[: 2 if quick else None]:
-        det = WaveletStepDetection().detect(imu).steps_.t_s.to_numpy()
-        m = np.array(match(det, ics))
+    tot, tot_in, tot_u = np.zeros(3, int), np.zeros(3, int), np.zeros(3, int)
+    for name, imu, ics, bouts, union in mobgap_trials()[: 2 if quick else None]:
+        det = WaveletStepDetection(stride_check=False).detect(imu).steps_.t_s.to_numpy()  # lower back: a trunk sensor
         inside = np.zeros(len(det), bool)
         for a, b in bouts:
             inside |= (det >= a - TOL_S) & (det <= b + TOL_S)
-        m_in = np.array(match(det[inside], ics))
-        tot += m
-        tot_in += m_in
-        rows.append(_row(f"mobgap/{name} ({len(ics)} ICs)", "IC F1 whole recording", _f1(*m), "", ">= 0.95", "-"))
+        m, m_in, m_u = np.array(match(det, ics)), np.array(match(det[inside], ics)), np.array(match(det, union))
+        tot, tot_in, tot_u = tot + m, tot_in + m_in, tot_u + m_u
+        rows.append(_row(f"mobgap/{name} ({len(ics)} INDIP ICs)", "IC F1 whole recording vs INDIP", _f1(*m), "", ">= 0.95", "-"))
+        rows.append(_row(f"mobgap/{name} ({len(union)} union ICs)", "IC F1 whole recording vs INDIP + Stereophoto", _f1(*m_u),
+                         "", ">= 0.95", "-"))
     anchor = "INDIP reference ICs (issue 3 target; no published figure checked here)"
-    rows.append(_row("mobgap/all", "IC F1 whole recording (bout detection included)", _f1(*tot), "", ">= 0.95", anchor))
-    rows.append(_row("mobgap/all", "IC F1 within reference walking bouts", _f1(*tot_in), "", ">= 0.95", anchor))
+    rows.append(_row("mobgap/all", "IC F1 whole recording vs INDIP (bout detection included)", _f1(*tot), "", ">= 0.95", anchor))
+    rows.append(_row("mobgap/all", "IC F1 whole recording vs INDIP + Stereophoto ICs", _f1(*tot_u), "", ">= 0.95", anchor))
+    rows.append(_row("mobgap/all", "IC F1 within INDIP walking bouts", _f1(*tot_in), "", ">= 0.95", anchor))
 
     name, imu, truth, _ = ox[0]
     u0 = uniform_imu(imu, 100.0)

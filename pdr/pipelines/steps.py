@@ -25,12 +25,20 @@ def empty_steps_table() -> pd.DataFrame:
     return pd.DataFrame({c: pd.Series(dtype=int if c == "bout_id" else float) for c in STEPS_COLUMNS})
 
 
-def make_detector(section: dict | None):
-    """The ``[steps]`` section: ``method = "wavelet" | "peak"`` (default wavelet) plus that detector's parameters."""
+TRUNK_PLACEMENTS = ("waist", "trunk", "head")  # sensors that see every step: the gait period is never a stride
+
+
+def make_detector(section: dict | None, placement: str = "unknown"):
+    """The ``[steps]`` section: ``method = "wavelet" | "peak"`` (default wavelet) plus that detector's parameters.
+
+    For a trunk placement the wavelet detector's ``stride_check`` defaults to False (unless the section sets it).
+    """
     section = dict(section or {})
     method = section.pop("method", "wavelet")
     if method not in DETECTORS:
         raise InputError(f"configuration [steps]: expected method one of {', '.join(DETECTORS)}, found {method!r}")
+    if method == "wavelet" and placement in TRUNK_PLACEMENTS:
+        section.setdefault("stride_check", False)
     return DETECTORS[method].from_config(section)
 
 
@@ -42,7 +50,7 @@ def detect_steps(rec: Recording, config: dict) -> pd.DataFrame:
     """
     if not isinstance(config, dict):
         raise InputError(f"configuration: expected a dict of sections, found {type(config).__name__}")
-    detector = make_detector(config.get("steps"))
+    detector = make_detector(config.get("steps"), rec.placement)
     heading = AttitudeStepHeading.from_config(config.get("heading"))
     u = uniform_imu(rec.imu)
     if u.rate_hz < LOW_RATE_HZ:

@@ -39,14 +39,17 @@ def window_acf(x: np.ndarray, win: int, hop: int, max_lag: int) -> tuple[np.ndar
     return starts, ac, np.sqrt(var[:, 0] / win)
 
 
-def step_period_from_acf(acf: np.ndarray, rate_hz: float, min_step_s: float, max_step_s: float) -> tuple[float, float]:
+def step_period_from_acf(acf: np.ndarray, rate_hz: float, min_step_s: float, max_step_s: float,
+                         stride_check: bool = True) -> tuple[float, float]:
     """Step period (s) and its periodicity (acf value at the gait period) from one autocorrelation.
 
     The fundamental is the first autocorrelation peak between the shortest step and the longest stride that is at
     least half as high as the highest one (later peaks are its multiples); that fundamental is a stride, and the step half of it,
     when it is longer than the longest step or when the acf has a peak (not a trough) at half of it: the other foot's
     contact. A step-periodic signal is in anti-phase at half its period (Oxford hand, bag, neck: acf about -0.8, a
-    trough); a thigh-worn phone shows a small peak there (Oxford pockets: prominence +0.1 to +0.4).
+    trough); a thigh-worn phone shows a small peak there (Oxford pockets: prominence +0.1 to +0.4). Slow, irregular
+    walking seen from the trunk can show such a peak too (mobgap daily living), so ``stride_check=False`` (a sensor
+    on the trunk sees every step) keeps only the first rule.
     """
     lo = max(1, int(np.floor(min_step_s * rate_hz)))
     hi = min(len(acf) - 1, int(np.ceil(2.0 * max_step_s * rate_hz)))
@@ -63,12 +66,12 @@ def step_period_from_acf(acf: np.ndarray, rate_hz: float, min_step_s: float, max
     period = lag / rate_hz
     quarter = [acf[min(len(acf) - 1, max(1, int(round(lag * f))))] for f in (0.25, 0.5, 0.75)]
     half_prominence = quarter[1] - 0.5 * (quarter[0] + quarter[2])
-    is_stride = period > max_step_s or (period / 2 >= min_step_s and half_prominence > 0.0)
+    is_stride = period > max_step_s or (stride_check and period / 2 >= min_step_s and half_prominence > 0.0)
     return (period / 2 if is_stride else period), best
 
 
 def walking_mask(x: np.ndarray, rate_hz: float, *, window_s: float, min_step_s: float, max_step_s: float,
-                 min_acc_std_mps2: float, min_periodicity: float) -> tuple[np.ndarray, np.ndarray]:
+                 min_acc_std_mps2: float, min_periodicity: float, stride_check: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """Per-sample walking flag and step period (s, NaN where not walking) of a signal (the acceleration norm).
 
     Windows of ``window_s`` with a hop of a quarter window; each window decides for its central hop.
@@ -85,7 +88,7 @@ def walking_mask(x: np.ndarray, rate_hz: float, *, window_s: float, min_step_s: 
     for s, a, sd in zip(starts, acf, std):
         if sd < min_acc_std_mps2:
             continue
-        p, strength = step_period_from_acf(a, rate_hz, min_step_s, max_step_s)
+        p, strength = step_period_from_acf(a, rate_hz, min_step_s, max_step_s, stride_check)
         if not np.isfinite(p) or strength < min_periodicity:
             continue
         c0 = s + (win - hop) // 2

@@ -11,7 +11,7 @@ import pywt
 from pdr.base import Algorithm
 from pdr.errors import InputError
 from pdr.signals.attitude import gravity_direction_lowpass
-from pdr.signals.resample import UniformImu, uniform_imu
+from pdr.signals.resample import UniformImu, moving_average, uniform_imu
 from pdr.steps.gait import bouts_from_mask, walking_mask
 
 STEP_COLUMNS = ["t_s", "bout_id"]
@@ -78,6 +78,12 @@ class WaveletStepDetection(Algorithm):
     min_periodicity : a walking window's autocorrelation at the gait period is at least this.
     min_bout_steps : shorter walking runs are not walking (a turn on the spot, handling the phone).
     min_peak_ratio : a maximum smaller than this fraction of the bout's median maximum is not a step.
+    signal : ``"norm"`` (|a|) or ``"vertical"`` (a along the low-passed gravity direction); both orientation-free.
+    bout_pad_s : walking bouts are widened by this (a window half walking already votes for walking).
+    stride_check : whether a gait period may be a stride (thigh, arm); False for a sensor on the trunk (waist,
+        lower back, chest, head), which sees every step. See :func:`pdr.steps.gait.step_period_from_acf`.
+    track_cadence : resample each bout at a uniform gait phase (the kept octave follows a changing cadence)
+        instead of at one rate per bout.
 
     Attributes
     ----------
@@ -107,8 +113,11 @@ class WaveletStepDetection(Algorithm):
 
     def __init__(self, *, level: int = 4, min_step_freq_hz: float = 1.0, max_step_freq_hz: float = 3.5,
                  bout_window_s: float = 5.0, min_acc_std_mps2: float = 0.3, min_periodicity: float = 0.25,
-                 min_bout_steps: int = 4, min_peak_ratio: float = 0.25, signal: str = "norm", bout_pad_s: float = 2.5):
+                 min_bout_steps: int = 4, min_peak_ratio: float = 0.25, signal: str = "norm", bout_pad_s: float = 2.5,
+                 stride_check: bool = True, track_cadence: bool = True):
         self.level = level
+        self.track_cadence = track_cadence
+        self.stride_check = stride_check
         self.signal = signal
         self.bout_pad_s = bout_pad_s
         self.min_step_freq_hz = min_step_freq_hz
@@ -139,7 +148,7 @@ class WaveletStepDetection(Algorithm):
         x = DETECTION_SIGNALS[self.signal](u)
         walking, period = walking_mask(x, u.rate_hz, window_s=self.bout_window_s, min_step_s=min_step_s,
                                        max_step_s=max_step_s, min_acc_std_mps2=self.min_acc_std_mps2,
-                                       min_periodicity=self.min_periodicity)
+                                       min_periodicity=self.min_periodicity, stride_check=self.stride_check)
         bouts = bouts_from_mask(walking, u.valid, u.rate_hz, min_bout_s=self.min_bout_steps * min_step_s,
                                 pad_s=self.bout_pad_s)
         times, bout_ids, rows = [], [], []
@@ -150,7 +159,9 @@ class WaveletStepDetection(Algorithm):
             if not len(p):
                 continue
             step_s = float(np.median(p))
-            t_peaks = self._bout_steps(u, x, a, b, step_s)
+            local = period[a:b] if self.track_cadence else np.full(b - a, step_s)
+            local = moving_average(np.where(np.isfinite(local), local, step_s), int(round(self.bout_window_s * u.rate_hz)))
+            t_peaks = self._bout_steps(u, x, a, b, local)
             for seg in self._split_stops(t_peaks, step_s, max_step_s):
                 if len(seg) < self.min_bout_steps:
                     continue
@@ -163,16 +174,21 @@ class WaveletStepDetection(Algorithm):
             self.bouts_ = pd.DataFrame(rows, columns=BOUT_COLUMNS)
         return self
 
-    def _bout_steps(self, u: UniformImu, x: np.ndarray, a: int, b: int, step_s: float) -> np.ndarray:
-        """Maxima of the level-``level`` detail, the bout resampled so the detail octave is centred on the cadence."""
+    def _bout_steps(self, u: UniformImu, x: np.ndarray, a: int, b: int, period_s: np.ndarray) -> np.ndarray:
+        """Maxima of the level-``level`` detail, the bout resampled so the detail octave is centred on the cadence.
+
+        ``period_s`` is the step period at each sample of the bout; the bout is resampled at a uniform *gait phase*
+        (``2^(level + 1/2)`` samples per step), so the kept octave follows the cadence when the walker speeds up.
+        """
         t = u.t_s[a:b]
-        fs = (2.0 ** (self.level + 0.5)) / step_s
-        n_out = int(np.floor((t[-1] - t[0]) * fs)) + 1
+        per_sample = 2.0 ** (self.level + 0.5)
+        phase = np.concatenate([[0.0], np.cumsum(np.diff(t) / period_s[1:])])  # in steps
+        n_out = int(np.floor(phase[-1] * per_sample)) + 1
         block = 2 ** self.level
         n_pad = max(block, int(np.ceil(n_out / block)) * block)
         filt_len = pywt.Wavelet("dmey").dec_len * block
         margin = (filt_len // block + 1) * block
-        tt = t[0] + np.arange(n_out) / fs
+        tt = np.interp(np.arange(n_out) / per_sample, phase, t)
         xs = np.interp(tt, t, x[a:b])
         xs = xs - xs.mean()
         total = n_pad + 2 * margin
@@ -188,19 +204,20 @@ class WaveletStepDetection(Algorithm):
             return np.zeros(0)
         amp = detail[k]
         k = k[amp >= self.min_peak_ratio * np.median(amp)]
-        tk = tt[k] + parabolic_offset(detail, k) / fs
-        return self._refine_to_impact(u, x, tk, step_s)
+        tk = np.interp(k + parabolic_offset(detail, k), np.arange(n_out), tt)
+        return self._refine_to_impact(u, x, tk, np.interp(tk, t, period_s))
 
-    def _refine_to_impact(self, u: UniformImu, x: np.ndarray, tk: np.ndarray, step_s: float) -> np.ndarray:
+    def _refine_to_impact(self, u: UniformImu, x: np.ndarray, tk: np.ndarray, step_s: np.ndarray) -> np.ndarray:
         """Move each maximum to the largest |a| within a quarter step (the contact impact)."""
-        half = max(1, int(round(0.25 * step_s * u.rate_hz)))
+        half = np.maximum(1, np.round(0.25 * step_s * u.rate_hz).astype(int))
         centre = np.clip(np.round((tk - u.t_s[0]) * u.rate_hz).astype(int), 0, len(x) - 1)
-        offs = np.arange(-half, half + 1)
+        offs = np.arange(-half.max(), half.max() + 1)
         idx = np.clip(centre[:, None] + offs[None, :], 0, len(x) - 1)
-        best = idx[np.arange(len(idx)), np.argmax(x[idx], axis=1)]
+        score = np.where(np.abs(offs)[None, :] <= half[:, None], x[idx], -np.inf)
+        best = idx[np.arange(len(idx)), np.argmax(score, axis=1)]
         tb = u.t_s[best] + parabolic_offset(x, best) / u.rate_hz
         tb = np.sort(tb)
-        keep = np.concatenate([[True], np.diff(tb) >= 0.5 * step_s])
+        keep = np.concatenate([[True], np.diff(tb) >= 0.5 * np.interp(tb[1:], tk, step_s)])
         return tb[keep]
 
     @staticmethod
