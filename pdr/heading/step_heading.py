@@ -21,6 +21,39 @@ def wrap(a: np.ndarray) -> np.ndarray:
     return np.angle(np.exp(1j * np.asarray(a, float)))
 
 
+def _bandpass(acc_enu: np.ndarray, rate_hz: float, step_s: float) -> np.ndarray | None:
+    """Earth-frame acceleration band-passed to the octave around the step frequency (None if too short / too slow a rate)."""
+    f = 1.0 / step_s
+    nyq = 0.5 * rate_hz
+    if len(acc_enu) < 3 * rate_hz * step_s or 1.4 * f >= nyq:
+        return None
+    sos = signal.butter(2, [f / 1.4 / nyq, 1.4 * f / nyq], btype="band", output="sos")
+    return signal.sosfiltfilt(sos, acc_enu, axis=0)
+
+
+def _products(a: np.ndarray, q: int) -> np.ndarray:
+    """Per-sample products whose window sums give the direction: ee, nn, en, vv, e(t) v(t+q), n(t) v(t+q)."""
+    e, n, v = a[:, 0], a[:, 1], a[:, 2]
+    v_adv = np.concatenate([v[q:], np.zeros(q)])
+    return np.column_stack([e * e, n * n, e * n, v * v, e * v_adv, n * v_adv])
+
+
+def _direction(sums: np.ndarray, count: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Walking direction and quality from window sums of :func:`_products` (vectorised over windows)."""
+    m = sums / np.maximum(count, 1)[:, None]
+    ee, nn, en, vv, ce, cn = m.T
+    tr, det = ee + nn, ee * nn - en * en
+    disc = np.sqrt(np.maximum(0.25 * tr * tr - det, 0.0))
+    l1, l2 = 0.5 * tr + disc, 0.5 * tr - disc
+    theta = 0.5 * np.arctan2(2.0 * en, ee - nn)  # principal axis
+    ax, ay = np.cos(theta), np.sin(theta)
+    proj = ce * ax + cn * ay
+    theta = np.where(proj < 0, theta + np.pi, theta)
+    share = (l1 - l2) / np.maximum(l1 + l2, 1e-12)
+    norm = np.sqrt(np.maximum(l1, 1e-12) * np.maximum(vv, 1e-12))
+    return wrap(theta), share * np.minimum(1.0, np.abs(proj) / norm)
+
+
 def walking_direction(acc_enu: np.ndarray, rate_hz: float, step_s: float) -> tuple[float, float]:
     """Walking direction (rad, CCW from the frame's x axis) of a stretch of earth-frame acceleration, and its quality.
 
@@ -31,25 +64,11 @@ def walking_direction(acc_enu: np.ndarray, rate_hz: float, step_s: float) -> tup
     support and turns negative, braking, after it). Quality in [0, 1]: the principal axis' share of the
     horizontal variance times the normalised quarter-step correlation.
     """
-    n = len(acc_enu)
-    f = 1.0 / step_s
-    nyq = 0.5 * rate_hz
-    if n < 3 * rate_hz * step_s or 1.4 * f >= nyq:
+    a = _bandpass(np.asarray(acc_enu, float), rate_hz, step_s)
+    if a is None:
         return float("nan"), 0.0
-    sos = signal.butter(2, [f / 1.4 / nyq, 1.4 * f / nyq], btype="band", output="sos")
-    a = signal.sosfiltfilt(sos, acc_enu, axis=0)
-    h, v = a[:, :2], a[:, 2]
-    cov = h.T @ h / n
-    w, vec = np.linalg.eigh(cov)
-    axis = vec[:, 1]
-    share = float((w[1] - w[0]) / max(w[1] + w[0], 1e-12))
-    q = int(round(0.25 * step_s * rate_hz))
-    c = h[: n - q].T @ v[q:] / max(n - q, 1)
-    proj = float(c @ axis)
-    norm = np.sqrt(max(w[1], 1e-12) * max(float(v @ v / n), 1e-12))
-    if proj < 0:
-        axis = -axis
-    return float(np.arctan2(axis[1], axis[0])), share * min(1.0, abs(proj) / norm)
+    d, q = _direction(_products(a, int(round(0.25 * step_s * rate_hz))).sum(axis=0)[None, :], np.array([len(a)]))
+    return float(d[0]), float(q[0])
 
 
 def circular_smooth(angle: np.ndarray, weight: np.ndarray, half: int) -> np.ndarray:
@@ -145,11 +164,16 @@ class AttitudeStepHeading(Algorithm):
             idx = np.flatnonzero(bout == b)
             tb = t[idx]
             sb = float(np.median(np.diff(tb))) if len(tb) > 1 else step_s
-            for k, tk in zip(idx, tb):
-                lo = np.searchsorted(u.t_s, tk - 2.0 * sb)
-                hi = np.searchsorted(u.t_s, tk + 2.0 * sb)
-                d, qual = walking_direction(acc_e[lo:hi], u.rate_hz, sb)
-                self.direction_rad_[k], self.direction_quality_[k] = d, qual
+            lo = np.searchsorted(u.t_s, tb[0] - 3.0 * sb)
+            hi = np.searchsorted(u.t_s, tb[-1] + 3.0 * sb)
+            a = _bandpass(acc_e[lo:hi], u.rate_hz, sb)
+            if a is None:
+                continue
+            c = np.vstack([np.zeros((1, 6)), np.cumsum(_products(a, int(round(0.25 * sb * u.rate_hz))), axis=0)])
+            w_lo = np.clip(np.searchsorted(u.t_s, tb - 2.0 * sb) - lo, 0, len(a))
+            w_hi = np.clip(np.searchsorted(u.t_s, tb + 2.0 * sb) - lo, 0, len(a))
+            d, qual = _direction(c[w_hi] - c[w_lo], w_hi - w_lo)
+            self.direction_rad_[idx], self.direction_quality_[idx] = d, np.where(w_hi - w_lo > 0, qual, 0.0)
         vote = self.direction_quality_ >= self.min_direction_quality
         raw_offset = wrap(self.direction_rad_ - yaw_dev)
         offset = nan.copy()
