@@ -50,7 +50,7 @@ def calibrate_recordings(recs: list[Path], out: Path, config_path=None) -> str:
         found = ", ".join(f"{n} {why}" for why, n in reasons.items()) or "no GNSS fix inside a walking bout"
         raise InputError(f"calibrate: expected GNSS segments of walking (usable fixes, steps, straight path), found none "
                          f"usable in {len(recordings)} recording(s): {found}")
-    save_model(akf.model_, out, n_steps=akf.n_steps_, distance_m=akf.distance_m_, n_segments=int(segs["used"].sum()),
+    save_model(akf.model_, out, n_steps=int(round(akf.n_steps_)), distance_m=round(akf.distance_m_, 2), n_segments=int(segs["used"].sum()),
                n_segments_rejected=int((~segs["used"]).sum()), updated=akf.updated_,
                recordings=[rec.id for rec in recordings], calibration=akf.get_params())
     params = ", ".join(f"{n}={getattr(akf.model_, n):.4g}" for n in akf.model_.theta_names)

@@ -1,0 +1,300 @@
+"""Step length and calibration: walking-bout distance (mobgap lower back, no per-user calibration), second-lap distance
+after calibrating on the first lap's landmarks (HuMoLiRe phone walk), and the adaptive Kalman filter on a simulated
+30-minute walk with GNSS (distance after calibration, convergence after a change of pace, the paper's Figure 5 as
+``out/bench/step_length_akf.png``).
+
+Run: ``.venv/bin/python -m benchmarks step_length`` (``--quick``: skips the speed row's repetitions).
+
+References used (say which, README "caution"): mobgap bout distance = INDIP step-length sum of the bout,
+``avg_stride_length_m * (n_initial_contacts - 1) / 2`` (``reference/bouts.csv`` ``step_length_sum_m``), not INDIP's
+``Length``; HuMoLiRe lap distance = the polyline through the surveyed landmarks between their click times.
+"""
+
+from __future__ import annotations
+
+import tempfile
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from pdr.calibration import AdaptiveKalmanCalibration, RecursiveStepCalibration
+from pdr.io.importers import import_recordings
+from pdr.io.recording import Recording, load_recording
+from pdr.pipelines.steps import detect_steps
+from pdr.signals import uniform_imu
+from pdr.steps import acc_norm_signal, step_features
+from pdr.step_length import MODELS, RegressionStepLength, ZijlstraStepLength, with_signal_features
+
+ROOT = Path(__file__).resolve().parents[1]
+DATASETS = ROOT / "datasets" if (ROOT / "datasets" / "mobgap_lowerback_tvs_lab").is_dir() else ROOT.parent / "shared" / "datasets"
+OUT = ROOT / "out" / "bench"
+AREA = "step_length"
+IC_TOL_S = 0.2  # a detected contact up to this far outside a reference bout still belongs to it
+LANDMARK_H_ACC_M = 0.3  # 1-sigma position of a landmark fix: the click lags the passing by ~0.2 s at ~1.5 m/s
+SIM_CONFIG = ROOT / "configs" / "sim" / "walk_30min_gps.toml"
+CONVERGED_M = 0.03  # the filter has converged when it stays within 3 cm of the true mean step of the new pace
+
+
+def _row(case: str, metric: str, ours: float, unit: str, target: str, anchor: str) -> dict:
+    return {"area": AREA, "case": case, "metric": metric, "ours": ours, "unit": unit, "target": target, "anchor": anchor}
+
+
+# ------------------------------------------------------------------------------------------------ mobgap lower back
+def _mobgap_recordings(tmp: Path) -> list[Recording]:
+    recs = []
+    for participant in ("001", "002"):
+        src = DATASETS / "mobgap_lowerback_tvs_lab" / "lab" / "HA" / participant
+        recs += [load_recording(p) for p in import_recordings("mobgap", src, tmp / participant)]
+    return recs
+
+
+def _reference_steps(rec: Recording, bouts: pd.DataFrame) -> pd.DataFrame:
+    """The reference initial contacts as a steps table (bout ids from the reference bouts)."""
+    t = rec.reference["steps"]["t_s"].to_numpy(float)
+    bout = np.full(len(t), -1)
+    for b, row in bouts.iterrows():
+        bout[(t >= row.t_start_s - 1e-6) & (t <= row.t_end_s + 1e-6)] = b
+    keep = bout >= 0
+    steps = pd.DataFrame({"t_s": t[keep], "bout_id": bout[keep]})
+    u = uniform_imu(rec.imu)
+    feats = step_features(steps, u, acc_norm_signal(u))  # the steps table's features, at the reference contacts
+    return with_signal_features(pd.concat([steps, feats], axis=1), rec)
+
+
+def _bout_distance_reference_ics(model, steps: pd.DataFrame, bouts: pd.DataFrame, subject: dict) -> np.ndarray:
+    """Per bout: mean model step over the intervals between consecutive reference contacts x the reference number of
+    steps (n_initial_contacts - 1). Intervals spanning a contact the reference lost (gap > 1.6 x the bout's median)
+    are left out of the mean."""
+    length = model.estimate(steps, subject).step_length_m_
+    out = np.full(len(bouts), np.nan)
+    for b, row in bouts.iterrows():
+        idx = np.flatnonzero(steps["bout_id"].to_numpy() == b)
+        if len(idx) < 2:
+            continue
+        dt = np.diff(steps["t_s"].to_numpy()[idx])
+        ok = dt < 1.6 * np.median(dt)
+        out[b] = float(np.mean(length[idx[1:]][ok])) * (row.n_initial_contacts - 1)
+    return out
+
+
+def _bout_distance_detected(model, steps: pd.DataFrame, bouts: pd.DataFrame, subject: dict) -> np.ndarray:
+    """Per bout: the sum of the model's lengths of the detected steps whose contact falls after the bout's first
+    reference contact and by its last (+- IC_TOL_S)."""
+    length = model.estimate(steps, subject).step_length_m_ if len(steps) else np.empty(0)
+    t = steps["t_s"].to_numpy(float)
+    return np.array([length[(t > row.t_start_s + IC_TOL_S) & (t <= row.t_end_s + IC_TOL_S)].sum()
+                     for _, row in bouts.iterrows()])
+
+
+def _mobgap_rows(tmp: Path) -> list[dict]:
+    recs = _mobgap_recordings(tmp)
+    anchor = "mobgap SlZijlstra, Zijlstra & Hof 2003 inverted pendulum, K = 4.739/4 (Soltani et al. 2021)"
+    results: dict[tuple[str, str, str], list[tuple[float, float]]] = {}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for rec in recs:
+            path = rec.path / "reference" / "bouts.csv"  # the importer's per-bout INDIP reference
+            bouts = pd.read_csv(path) if path.is_file() else pd.DataFrame()
+            if len(bouts) == 0:
+                continue
+            test = rec.id.split("_")[0]
+            ref = bouts["step_length_sum_m"].to_numpy(float)
+            ref_steps = _reference_steps(rec, bouts)
+            det_steps = detect_steps(rec, {})
+            det_steps = with_signal_features(det_steps, rec) if len(det_steps) else det_steps
+            for name in ("zijlstra", "weinberg", "kim", "regression"):
+                model = MODELS[name].population()
+                est = _bout_distance_reference_ics(model, ref_steps, bouts, rec.subject)
+                results.setdefault((test, "reference ICs", name), []).extend(zip(est, ref))
+                if name in ("zijlstra", "regression") and len(det_steps):
+                    est = _bout_distance_detected(model, det_steps, bouts, rec.subject)
+                    results.setdefault((test, "detected steps", name), []).extend(zip(est, ref))
+    rows = []
+    names = {"Test5": "straight walk (Test5)", "Test11": "daily living with turns (Test11)"}
+    order = {"zijlstra": 0, "regression": 1, "kim": 2, "weinberg": 3}
+    for (test, steps_src, name), pairs in sorted(results.items(), key=lambda kv: (kv[0][0] != "Test5", kv[0][1] != "reference ICs", order[kv[0][2]])):
+        est, ref = np.array(pairs, float).T
+        ok = np.isfinite(est)
+        total = 100.0 * (est[ok].sum() / ref[ok].sum() - 1.0)
+        case = f"mobgap lower back, {names.get(test, test)}, {int(ok.sum())} bouts, {ref[ok].sum():.1f} m, {steps_src}, {name} preset"
+        target = "<= 5%" if name == "zijlstra" else "baseline"
+        rows.append(_row(case, "distance error, sum of bouts", round(total, 1), "%", target, anchor))
+        if name == "zijlstra":
+            per_bout = 100.0 * np.mean(np.abs(est[ok] / ref[ok] - 1.0))
+            rows.append(_row(case, "mean |bout distance error|", round(per_bout, 1), "%", target, anchor))
+    return rows
+
+
+# ------------------------------------------------------------------------------------------------ HuMoLiRe phone walk
+def _humolire_rows(tmp: Path) -> list[dict]:
+    src = DATASETS / "humolire_phone_landmarks" / "data" / "imus" / "1" / "square_2x"
+    rec = load_recording(import_recordings("humolire", src, tmp / "humolire")[0])
+    lm = rec.reference["landmarks"].reset_index(drop=True)
+    half = len(lm) // 2  # two laps of four landmarks
+    lap1 = lm.iloc[:half].assign(h_acc_m=LANDMARK_H_ACC_M)  # the "GNSS" of the calibration
+    lap2 = lm.iloc[half - 1:]  # from the last landmark of lap 1 around to the end
+    dist2 = float(np.hypot(np.diff(lap2["e_m"]), np.diff(lap2["n_m"])).sum())
+    anchor = "Ladetto et al. 2000: 1.8% over 2,300 m after calibration (DGPS)"
+    rows = []
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        steps = with_signal_features(detect_steps(rec, {}), rec)
+        sel = ((steps["t_s"] > lap2["t_s"].iloc[0]) & (steps["t_s"] <= lap2["t_s"].iloc[-1])).to_numpy()
+        for name in ("regression", "weinberg", "kim", "zijlstra"):
+            prior = MODELS[name].population()
+            akf = AdaptiveKalmanCalibration(segment_steps=10, max_h_acc_m=1.0).fit(steps, lap1, prior, rec.subject)
+            before = prior.estimate(steps[sel], rec.subject).step_length_m_.sum()
+            after = akf.model_.estimate(steps[sel], rec.subject).step_length_m_.sum()
+            case = f"HuMoLiRe phone in hand, {name}: lap 2 ({dist2:.1f} m) after calibrating on lap 1 landmarks " \
+                   f"({int(akf.segments_['used'].sum())} segments, {akf.distance_m_:.1f} m, updated {akf.updated_})"
+            target = "<= 2%" if name == "regression" else "alternative"
+            rows.append(_row(case, "distance error", round(100.0 * (after / dist2 - 1.0), 1), "%", target, anchor))
+            rows.append(_row(case.split(":")[0] + ": lap 2, population preset (uncalibrated)", "distance error",
+                             round(100.0 * (before / dist2 - 1.0), 1), "%", "reference point", anchor))
+    return rows
+
+
+# ------------------------------------------------------------------------------------------------ simulated walk + GPS
+def _path_length(traj: pd.DataFrame, t_s: np.ndarray) -> np.ndarray:
+    """Cumulative horizontal path length (m) of the reference trajectory at the times ``t_s``."""
+    e, n = traj["e_m"].to_numpy(float), traj["n_m"].to_numpy(float)
+    cum = np.concatenate([[0.0], np.cumsum(np.hypot(np.diff(e), np.diff(n)))])
+    return np.interp(t_s, traj["t_s"].to_numpy(float), cum)
+
+
+def _pace_changes(truth: np.ndarray, window: int = 30, jump_m: float = 0.06) -> list[int]:
+    """Step indices where the true step length changes level: the medians of the ``window`` steps before and after
+    differ by more than ``jump_m`` (local maxima at least 2 windows apart)."""
+    n = len(truth)
+    score = np.zeros(n)
+    for k in range(window, n - window):
+        score[k] = abs(np.median(truth[k:k + window]) - np.median(truth[k - window:k]))
+    changes: list[int] = []
+    for k in np.argsort(-score):
+        if score[k] < jump_m:
+            break
+        if all(abs(k - c) > 2 * window for c in changes):
+            changes.append(int(k))
+    return sorted(changes)
+
+
+def _figure5(path: Path, akf: AdaptiveKalmanCalibration, recursive: np.ndarray, truth: np.ndarray,
+             changes: list[int]) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    k = np.arange(len(truth))
+    tr = akf.trace_
+    fig, ax = plt.subplots(figsize=(11, 4.5))
+    ax.plot(k, pd.Series(truth).rolling(9, center=True, min_periods=1).mean(), color="0.6", lw=1,
+            label="true step length (9-step mean)")
+    ax.plot(k, recursive, color="tab:orange", lw=1.2, ls="--", label="recursive prediction, population model (no GPS)")
+    ax.plot(k, tr["step_length_m"], color="tab:blue", lw=1.5, label="adaptive Kalman filter")
+    ax.fill_between(k, tr["step_length_m"] - tr["step_length_std_m"], tr["step_length_m"] + tr["step_length_std_m"],
+                    color="tab:blue", alpha=0.15, lw=0)
+    seg = akf.segments_[akf.segments_["used"]]
+    ax.plot(seg["k_last"], seg["measured_step_m"], "k.", ms=4, label="GPS distance / number of steps")
+    for c in changes:
+        ax.axvline(c, color="tab:red", lw=0.8, alpha=0.6)
+    ax.set_xlabel("step index")
+    ax.set_ylabel("step length (m)")
+    ax.set_title("Re-parameterising the step model with GPS (after Ladetto et al. 2000, Figure 5); red: changes of pace")
+    ax.legend(loc="lower left", fontsize=8, ncol=2)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _simulated_rows(tmp: Path) -> list[dict]:
+    from pdr.pipelines.run import gnss_local, gnss_settings
+
+    if not SIM_CONFIG.is_file():
+        warnings.warn(f"{SIM_CONFIG} not found: the simulated-walk rows are skipped", stacklevel=2)
+        return []
+    from pdr.sim import simulate_to_disk
+
+    rec = load_recording(simulate_to_disk(SIM_CONFIG, tmp / "sim", seed=0, force=True))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        steps = detect_steps(rec, {})
+    gnss = gnss_local(rec, gnss_settings({})).drop(columns="masked")
+    traj = rec.reference["trajectory"]
+    t = steps["t_s"].to_numpy(float)
+    cum = _path_length(traj, t)
+    truth = np.diff(cum, prepend=np.nan)
+    first = np.r_[True, steps["bout_id"].to_numpy()[1:] != steps["bout_id"].to_numpy()[:-1]]
+    truth[first] = np.nan  # a bout's first step has no previous contact
+    prior = RegressionStepLength.population()
+    case = f"simulated {(t[-1] - t[0]) / 60:.0f}-min walk, changing pace, GPS h_acc {np.nanmedian(gnss['h_acc_m']):.1f} m"
+    anchor = "Ladetto et al. 2000: < 2% after calibration; Figure 5 (AKF re-parameterises after a change)"
+    rows = []
+    # 1. calibrate on the first half with GPS, dead-reckon the second half with the calibrated model (no GPS)
+    half = t[0] + (t[-1] - t[0]) / 2
+    first_half = t <= half
+    cal = AdaptiveKalmanCalibration().fit(steps[first_half], gnss[gnss["t_s"] <= half], prior)
+    second = ~first_half & ~first
+    true_dist = float(np.nansum(truth[second]))
+    for label, model in (("population preset", prior), (f"calibrated on the first half ({cal.updated_})", cal.model_)):
+        est = float(model.estimate(steps[second]).step_length_m_.sum())
+        rows.append(_row(f"{case}: second half without GPS ({true_dist:.0f} m), {label}", "distance error",
+                         round(100.0 * (est / true_dist - 1.0), 2), "%", "< 1%" if model is cal.model_ else "reference point",
+                         anchor))
+    # 2. the adaptive filter over the whole walk: convergence after each change of pace, and Figure 5
+    akf = AdaptiveKalmanCalibration().fit(steps, gnss, prior)
+    recursive = RecursiveStepCalibration().estimate(steps, prior).step_length_m_
+    ok = np.isfinite(truth)
+    filled = np.where(ok, truth, np.interp(np.arange(len(truth)), np.flatnonzero(ok), truth[ok]))
+    changes = _pace_changes(filled)
+    est = akf.trace_["step_length_m"].to_numpy()
+    level = pd.Series(filled).rolling(21, center=True, min_periods=5).mean().to_numpy()
+    waits = []
+    bounds = [*changes, len(est)]
+    for c, nxt in zip(changes, bounds[1:]):
+        err = np.abs(est[c:nxt] - level[c:nxt])
+        late = np.flatnonzero(err > CONVERGED_M)
+        waits.append(int(late.max()) + 1 if len(late) else 0)
+    OUT.mkdir(parents=True, exist_ok=True)
+    _figure5(OUT / "step_length_akf.png", akf, recursive, filled, changes)
+    rows.append(_row(f"{case}: adaptive Kalman filter, {len(changes)} changes of pace (plot: out/bench/step_length_akf.png)",
+                     f"steps until within {100 * CONVERGED_M:.0f} cm of the new pace (worst)",
+                     max(waits) if waits else float("nan"), "steps", "<= 100", anchor))
+    filt_dist = float(np.nansum(np.where(first, np.nan, est)))
+    all_true = float(np.nansum(truth))
+    rows.append(_row(f"{case}: adaptive Kalman filter over the whole walk ({all_true:.0f} m)", "distance error",
+                     round(100.0 * (filt_dist / all_true - 1.0), 2), "%", "< 1%", anchor))
+    return rows
+
+
+# ------------------------------------------------------------------------------------------------ speed
+def _speed_row(quick: bool) -> dict:
+    rate, hours = 100.0, 1.0
+    t = np.arange(0, hours * 3600.0, 1.0 / rate)
+    rng = np.random.default_rng(0)
+    imu = pd.DataFrame({"t_s": t, "acc_x_mps2": 0.8 * np.sin(2 * np.pi * 1.8 * t + 1) + 0.2 * rng.standard_normal(len(t)),
+                        "acc_y_mps2": 0.2 * rng.standard_normal(len(t)),
+                        "acc_z_mps2": 9.80665 + 2.5 * np.sin(2 * np.pi * 1.8 * t) + 0.2 * rng.standard_normal(len(t))})
+    steps = pd.DataFrame({"t_s": np.arange(1.0, t[-1] - 1.0, 1 / 1.8), "bout_id": 0})
+    model = ZijlstraStepLength.population(sensor_height_m=1.0)
+    best = np.inf
+    for _ in range(1 if quick else 3):
+        t0 = time.perf_counter()
+        model.estimate(with_signal_features(steps, imu))
+        best = min(best, time.perf_counter() - t0)
+    return _row(f"signal features + Zijlstra for 1 h at 100 Hz ({len(steps)} steps)", "time", round(best, 2), "s",
+                "< 1 s", "issue 3: detection + features for 1 h under 1 s")
+
+
+def run(quick: bool = False) -> list[dict]:
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        rows += _mobgap_rows(Path(tmp))
+        rows += _humolire_rows(Path(tmp))
+        rows += _simulated_rows(Path(tmp))
+    rows.append(_speed_row(quick))
+    return rows
