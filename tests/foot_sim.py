@@ -21,10 +21,10 @@ def _rot(axis: int, angle: np.ndarray) -> np.ndarray:
 
 def simulate_foot_walk(*, n_strides: int = 12, stride_m: float | np.ndarray = 1.4, stance_s: float = 0.45,
                        swing_s: float = 0.65, turn_rad_per_stride: float = 0.0, rate_hz: float = 200.0,
-                       mounting_rotvec: tuple = (0.3, -0.5, 2.0), rest_s: float = 1.0, gyr_bias_radps: float = 0.0,
+                       mounting_rotvec: tuple = (0.3, -0.5, 2.0), rest_s: float = 1.0, toe_out_rad: float = 0.0, gyr_bias_radps: float = 0.0,
                        noise: float = 0.0, seed: int = 0) -> tuple[pd.DataFrame, pd.DataFrame]:
     """(imu, truth): a canonical IMU table of one foot and the true strides (``t_start_s, t_end_s, length_m``,
-    mid-stance to mid-stance)."""
+    mid-stance to mid-stance). ``toe_out_rad`` turns the foot (not its path) about the vertical."""
     fine = 10
     dt = 1.0 / (rate_hz * fine)
     lengths = np.broadcast_to(np.asarray(stride_m, dtype=float), (n_strides,))
@@ -57,7 +57,7 @@ def simulate_foot_walk(*, n_strides: int = 12, stride_m: float | np.ndarray = 1.
         pitch[hr] = -0.05 * np.sin(0.5 * np.pi * (t[hr] - (a - 0.15)) / 0.15) ** 2
         truth.append((a - 0.5 * stance_s, b + 0.5 * stance_s, float(lengths[k])))
         x0, heading = x1, new_heading
-    R_foot = _rot(2, yaw) @ _rot(0, pitch) @ _rot(1, roll)  # foot -> world; foot x right, y forward, z up
+    R_foot = _rot(2, yaw - np.pi / 2 + toe_out_rad) @ _rot(0, pitch) @ _rot(1, roll)  # foot -> world; foot x right, y forward, z up
     R_mount = rotvec_to_matrix(np.asarray(mounting_rotvec, dtype=float))  # sensor -> foot
     R = R_foot @ R_mount
     # body rate from dR: R^T dR/dt = [w x]; specific force f = R^T (a + g)

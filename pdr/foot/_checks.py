@@ -31,25 +31,24 @@ def foot_imu_arrays(imu: pd.DataFrame, what: str = "foot IMU") -> tuple[np.ndarr
 
 
 def saturated_samples(values: np.ndarray, *, min_run: int = 3, min_abs: float = 0.0) -> np.ndarray:
-    """Samples where a channel sits at its own extreme value for ``min_run`` or more samples in a row (clipping).
+    """Samples of a clipped channel: ``min_run`` or more consecutive identical values at ``|value| >= min_abs``
+    that nothing nearby exceeds (a flat top, not a quantised turning point).
 
-    A real signal touches its maximum for one sample; a saturated sensor stays there. Returns a bool mask (N,).
+    A moving sensor does not hold a large reading; one at the end of its range does. Returns a bool mask (N,).
     """
     mask = np.zeros(len(values), dtype=bool)
+    if len(values) < min_run:
+        return mask
     for ch in range(values.shape[1]):
         x = values[:, ch]
-        for extreme in (x.max(), x.min()):
-            if abs(extreme) <= min_abs:
-                continue
-            at = np.isclose(x, extreme, rtol=0.0, atol=1e-9 * max(1.0, abs(extreme)))
-            if at.sum() < min_run:
-                continue
-            # runs of consecutive True
-            edges = np.diff(np.r_[0, at.astype(np.int8), 0])
-            starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
-            for s, e in zip(starts, ends):
-                if e - s >= min_run:
-                    mask[s:e] = True
+        same = np.r_[False, x[1:] == x[:-1]] & (np.abs(x) >= min_abs)
+        # a run of k repeats is k+1 identical samples
+        edges = np.diff(np.r_[0, same.astype(np.int8), 0])
+        for s, e in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)):
+            if e - s + 1 >= min_run:
+                near = np.abs(x[max(s - 1 - 2 * min_run, 0):e + 2 * min_run])
+                if near.max() <= abs(x[s]):
+                    mask[s - 1:e] = True
     return mask
 
 

@@ -20,6 +20,14 @@ def _runs(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
 
 
+def _white_noise_norm(x: np.ndarray) -> float:
+    """Robust white-noise level of the norm of a 3-axis signal: the MAD of sample-to-sample differences (the smooth
+    motion of a foot hardly changes between two samples, the sensor noise does)."""
+    d = np.abs(np.diff(x, axis=0))
+    sigma = float(np.median(d)) / (0.6745 * np.sqrt(2.0))
+    return sigma * np.sqrt(x.shape[1])
+
+
 class ZeroVelocityDetection(Algorithm):
     """Stance (foot at rest on the ground) and swing phases of a shoe-mounted IMU.
 
@@ -30,9 +38,9 @@ class ZeroVelocityDetection(Algorithm):
     gyr_threshold_radps : rms angular rate in the window below which the foot may be at rest.
     acc_threshold_mps2 : rms deviation of the specific force from its window mean (any orientation, any
         accelerometer scale error) below which the foot may be at rest.
-    noise_factor : the thresholds are raised to ``noise_factor`` times the sensor's own noise floor (the
-        5th percentile of the window statistics over the recording) when that is larger, so a noisy sensor does
-        not lose its stances.
+    noise_factor : the thresholds are raised to ``noise_factor`` times the sensor's own white noise (robust
+        standard deviation of sample-to-sample differences, norm over the axes) when that is larger, so a noisy
+        sensor does not lose its stances.
     min_stance_s : shorter rest phases are dropped (the foot passes through zero angular rate in mid-swing).
     min_swing_s : shorter motion bursts inside a stance (heel-strike shocks, a wobble) are merged into it.
 
@@ -89,8 +97,8 @@ class ZeroVelocityDetection(Algorithm):
         g_local = float(np.median(norm[quiet]))  # the accelerometer's own reading of gravity
         up = acc_mean / np.maximum(np.linalg.norm(acc_mean, axis=1, keepdims=True), 1e-9)
         acc_ms = uniform_filter1d(((acc - g_local * up) ** 2).sum(axis=1), w, mode="nearest")
-        gyr_thr = max(self.gyr_threshold_radps, self.noise_factor * float(np.sqrt(max(np.percentile(gyr_ms, 5), 0.0))))
-        acc_thr = max(self.acc_threshold_mps2, self.noise_factor * float(np.sqrt(max(np.percentile(acc_ms, 5), 0.0))))
+        gyr_thr = max(self.gyr_threshold_radps, self.noise_factor * _white_noise_norm(gyr))
+        acc_thr = max(self.acc_threshold_mps2, self.noise_factor * _white_noise_norm(acc))
         stat = gyr_ms / gyr_thr**2 + acc_ms / acc_thr**2
         mask = stat < 1.0
         starts, ends = _runs(~mask)
