@@ -106,7 +106,9 @@ class AttitudeStepHeading(Algorithm):
     Notes
     -----
     The device yaw is the integral of the attitude's rotation about the earth's up axis (:func:`yaw_increments`), so it
-    is defined whatever way the phone is held. Its frame is VQF's 6D frame: up is up, the zero of heading is arbitrary
+    is defined whatever way the phone is held. ``heading_change_rad`` is the change of the mean device yaw from one
+    step to the next (gyro only); ``heading_rad`` adds the smoothed offset, so its differences also follow slow
+    changes of how the phone is held. Its frame is VQF's 6D frame: up is up, the zero of heading is arbitrary
     (the magnetic heading gives the absolute one). The heading-change std grows with the VQF gyro-bias uncertainty
     times the elapsed time (drift) and with the angle random walk. Without a gyroscope, heading changes are
     unobservable: 0 with ``no_gyro_std_rad`` and a warning.
@@ -116,7 +118,7 @@ class AttitudeStepHeading(Algorithm):
     >>> h = AttitudeStepHeading().estimate(u, attitude, steps)   # doctest: +SKIP
     """
 
-    def __init__(self, *, offset_window_steps: int = 20, min_direction_quality: float = 0.2,
+    def __init__(self, *, offset_window_steps: int = 40, min_direction_quality: float = 0.2,
                  gyro_arw_rad_per_sqrt_s: float = 0.005, step_direction_std_rad: float = 0.02,
                  no_gyro_std_rad: float = np.pi / 2, mag_norm_tolerance: float = 0.15,
                  mag_dip_tolerance_rad: float = np.radians(10.0), mag_heading_std_rad: float = 0.1):
@@ -191,7 +193,7 @@ class AttitudeStepHeading(Algorithm):
         self.offset_rad_ = offset
         heading_unwrapped = yaw_dev + np.unwrap(offset)
         self.heading_rad_ = wrap(heading_unwrapped)
-        change = np.diff(heading_unwrapped, prepend=heading_unwrapped[0])
+        change = np.diff(yaw_dev, prepend=yaw_dev[0])  # the gyro's turn between steps; the offset is not in it
         self.heading_change_rad_ = change
         dt = np.diff(t, prepend=t[0])
         bias_sigma = attitude.bias_sigma_radps[i_hi]
