@@ -12,8 +12,8 @@ from pdr.signals.resample import UniformImu, moving_average
 FREQ_SMOOTH_STEPS = 4  # step frequency: mean spacing of the maxima over this many neighbouring intervals
 FFT_WINDOW_S = 4.0  # FFT window centred on each step (about 7 steps, cf. the paper's 7 s GPS periods)
 FFT_RESOLUTION_HZ = 0.02  # zero padding of the FFT
-ALTITUDE_SMOOTH_S = 4.0  # barometric altitude smoothing (barometers are noisy at the 0.1 m level)
-SLOPE_WINDOW_STEPS = 10  # slope over this many steps around each step
+ALTITUDE_SMOOTH_S = 8.0  # barometric altitude smoothing (indoor barometers wander by tenths of a metre within seconds)
+SLOPE_WINDOW_STEPS = 20  # slope over this many steps around each step (about 14 m: 0.3 m of baro noise -> 0.02 rad)
 NOMINAL_STEP_LENGTH_M = 0.7  # horizontal distance per step for a barometric slope when no GNSS gives it
 STANDARD_PRESSURE_HPA = 1013.25
 
