@@ -133,6 +133,11 @@ def run(quick: bool = False) -> list[dict]:
         tp, fp, fn = match(wav, truth)
         rows.append(_row(f"oxford/{name} ({n_true} steps)", "count error wavelet", e, "%", "|e| <= 2", BRAJDIC))
         rows.append(_row(f"oxford/{name}", "step F1 wavelet (0.25 s)", _f1(tp, fp, fn), "", "-", "-"))
+        gaps = np.diff(truth)
+        missed = int(np.sum((gaps > 1.7 * np.median(gaps)) & (gaps < 2.5 * np.median(gaps))))
+        if missed >= 3:  # the 10 Hz foot device of the optimisation set skips contacts: intervals of two steps
+            rows.append(_row(f"oxford/{name}", f"count error wavelet vs truth + {missed} two-step gaps", 100 * (len(wav) - n_true - missed)
+                             / (n_true + missed), "%", "|e| <= 2", "-"))
         rows.append(_row(f"oxford/{name}", "count error peak baseline", 100 * (len(peak) - n_true) / n_true, "%", "-", BRAJDIC))
         if np.isfinite(app):
             rows.append(_row(f"oxford/{name}", "count error app (steps_algo)", 100 * (app - n_true) / n_true, "%", "-",
