@@ -93,6 +93,13 @@ def test_zero_velocity_detects_slow_walking():
     assert len(det.stances_) == len(truth) + 1
 
 
+def test_thresholds_rise_with_the_sensor_noise():
+    imu, truth = simulate_foot_walk(n_strides=6, noise=40.0, seed=3)  # acc noise 2 m/s², gyro 0.2 rad/s
+    assert len(ZeroVelocityDetection().detect(imu).stances_) == len(truth) + 1
+    with pytest.warns(UserWarning, match="never rests"):
+        assert len(ZeroVelocityDetection(noise_factor=0.0).detect(imu).stances_) == 0
+
+
 def test_a_foot_that_never_rests_warns_and_gives_no_stance():
     t = np.arange(0, 10, 0.005)
     imu = pd.DataFrame({"t_s": t, "acc_x_mps2": 15 * np.sin(2 * np.pi * 2.8 * t), "acc_y_mps2": 3 * np.cos(2 * np.pi * 2.8 * t),

@@ -1,0 +1,120 @@
+"""Shoe-mounted IMUs: gaitmap motion-capture stride lengths (57 strides, both methods), x-io closed loop, stairs,
+and the speed on one hour of 200 Hz data from both feet (the real walk tiled).
+
+Recordings are made with the project's importers (``pdr.io.importers``, formats ``gaitmap`` and ``xio``) from
+``datasets/`` (or ``../shared/datasets``) into a temporary folder. The mocap reference is matched to our strides by
+the largest time overlap of (mid-stance to mid-stance) intervals of the same foot. Nothing is tuned per file.
+"""
+
+from __future__ import annotations
+
+import tempfile
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from pdr.foot import ZuptInsStride
+from pdr.io.importers import import_recordings
+from pdr.io.recording import Recording, load_recording
+from pdr.pipelines.foot import foot_strides
+
+ROOT = Path(__file__).resolve().parents[1]
+RAMPP = "Rampp et al. 2015 (shoe IMU, geriatric patients): 6.26 cm stride-length MAE"
+XIO = "x-io Gait-Tracking pipeline on this file: 82 mm"
+LOOP_M = 25.0  # the walked loop, from the x-io README ("about 25 m")
+
+
+def _data(name: str) -> Path:
+    for base in (ROOT / "datasets", ROOT / ".." / "shared" / "datasets"):
+        if (base / name).is_dir():
+            return base / name
+    raise FileNotFoundError(name)
+
+
+def _import(fmt: str, src: Path, dest: Path, **kw) -> dict[str, Recording]:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the x-io clock repair warning is expected
+        return {p.name: load_recording(p) for p in import_recordings(fmt, src, dest, **kw)}
+
+
+def mocap_errors(strides: pd.DataFrame, reference: pd.DataFrame) -> np.ndarray:
+    """Our length minus the mocap length, one per reference stride (same foot, largest time overlap)."""
+    errs = []
+    for _, r in reference.iterrows():
+        mine = strides[strides["foot"] == r["foot"]]
+        ov = np.minimum(mine["t_end_s"], r["t_end_s"]) - np.maximum(mine["t_start_s"], r["t_start_s"])
+        errs.append(float(mine["length_m"].iloc[int(np.argmax(ov.to_numpy()))] - r["length_m"]))
+    return np.asarray(errs)
+
+
+def _tile(imu: pd.DataFrame, n: int, rate_hz: float) -> pd.DataFrame:
+    out = pd.concat([imu] * int(np.ceil(n / len(imu))), ignore_index=True).iloc[:n].copy()
+    out["t_s"] = np.arange(n) / rate_hz
+    return out
+
+
+def run(quick: bool = False) -> list[dict]:
+    rows = []
+
+    def row(case, metric, ours, unit, target, anchor):
+        rows.append({"area": "foot", "case": case, "metric": metric, "ours": ours, "unit": unit, "target": target,
+                     "anchor": anchor})
+
+    with tempfile.TemporaryDirectory() as tmp:
+        gm = _import("gaitmap", _data("gaitmap_foot_imu_mocap"), Path(tmp) / "gm", rate_hz=204.8)
+        xio = _import("xio", _data("xio_foot_imu_loop_walk") / "short_walk.csv", Path(tmp) / "xio")["short_walk"]
+
+    walk = gm["walk_2x20m"]
+    ref = walk.reference["strides"]
+    case = f"gaitmap 2x20 m walk, {len(ref)} mocap strides"
+    variants = [
+        ("ZUPT INS + double feet", {"method": "zupt_ins"}, "<= 0.03"),
+        ("ZUPT INS, each foot alone", {"method": "zupt_ins", "double_feet": False}, "<= 0.03"),
+        ("FootStep-Tracker as the seed (pitch, liftoff to rest)",
+         {"method": "footstep_tracker", "double_feet": False, "footstep_tracker": {"integrate_from": "liftoff"}}, ""),
+        ("FootStep-Tracker (pitch, uplift to rest)", {"method": "footstep_tracker", "double_feet": False}, ""),
+        ("FootStep-Tracker (pitch, uplift to rest) + double feet", {"method": "footstep_tracker"}, ""),
+        ("FootStep-Tracker, 3-D attitude + double feet",
+         {"method": "footstep_tracker", "footstep_tracker": {"attitude": "full"}}, ""),
+    ]
+    for name, section, target in variants:
+        out = foot_strides(walk, {"foot": section})
+        err = mocap_errors(out, ref)
+        row(case, f"stride length MAE, {name}", round(float(np.mean(np.abs(err))), 4), "m", target, RAMPP)
+        if name.startswith("ZUPT INS + double"):
+            row(case, f"stride length bias, {name}", round(float(np.mean(err)), 4), "m", "", "")
+            z = err / mocap_errors(out.assign(length_m=out["length_std_m"]), ref.assign(length_m=0.0))
+            row(case, f"rms(error / length_std_m), {name}", round(float(np.sqrt(np.mean(z**2))), 2), "", "about 1", "")
+
+    ins = ZuptInsStride().estimate(xio.imu)
+    dist = float(ins.strides_["length_m"].sum())
+    err = float(np.hypot(*ins.final_position_m_[:2]))
+    loop = f"x-io loop walk (about {LOOP_M:g} m), ZUPT INS"
+    row(loop, "final horizontal position error", round(err, 4), "m", f"<= {0.003 * LOOP_M:.3f}", XIO)
+    row(loop, "final error / distance walked (INS)", round(100 * err / dist, 3), "%", "<= 0.3", "x-io: 0.33% of 25 m")
+    row(loop, "final height error", round(float(abs(ins.final_position_m_[2])), 3), "m", "", "")
+    row(loop, "distance walked (sum of strides)", round(dist, 2), "m", "about 25", "x-io README: about 25 m")
+
+    for name in ("stairs_up", "stairs_down"):
+        s = ZuptInsStride().estimate(gm[name].imu).strides_
+        climb = s[np.abs(s["dz_m"]) > 0.15]
+        row(f"gaitmap {name.replace('_', ' ')}, left foot, ZUPT INS", "strides / strides climbing > 0.15 m",
+            f"{len(s)} / {len(climb)}", "", "", "no per-stride truth")
+        row(f"gaitmap {name.replace('_', ' ')}, left foot, ZUPT INS", "median height change per climbing stride",
+            round(float(np.median(climb["dz_m"])), 3) if len(climb) else float("nan"), "m", "",
+            "two stair risers, about 0.3-0.35 m")
+
+    minutes = 10 if quick else 60
+    n = int(200 * 60 * minutes)
+    big = Recording(meta=walk.meta, imu=_tile(walk.imu, n, 200.0),
+                    extra_imus={"foot_right": _tile(walk.extra_imus["foot_right"], n, 200.0)})
+    for method in ("zupt_ins", "footstep_tracker"):
+        t0 = time.perf_counter()
+        out = foot_strides(big, {"foot": {"method": method}})
+        dt = time.perf_counter() - t0
+        row(f"{minutes} min of 200 Hz, both feet (gaitmap walk tiled), {len(out)} strides",
+            f"processing time, {method}", round(dt, 2), "s", "< 10" if minutes == 60 else "", "")
+    return rows
