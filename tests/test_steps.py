@@ -126,6 +126,12 @@ def test_wavelet_rejects_bad_params():
         WaveletStepDetection(min_step_freq_hz=4.0).detect(imu)
     with pytest.raises(InputError, match="level"):
         WaveletStepDetection(level=0).detect(imu)
+    with pytest.raises(InputError, match="signal"):
+        WaveletStepDetection(signal="x").detect(imu)
+    with pytest.raises(InputError, match="DataFrame"):
+        WaveletStepDetection().detect(imu.to_numpy())
+    with pytest.raises(InputError, match="increasing"):
+        WaveletStepDetection().detect(imu.iloc[::-1])
 
 
 @settings(max_examples=8, deadline=None)

@@ -98,10 +98,10 @@ class WaveletStepDetection(Algorithm):
     "reproduces the step frequency very well, with one maximum only at each occurrence"; maxima are picked within a
     fixed interval, and "if a maximum peak is not followed, after a certain time, by another one, the person is still
     considered at the previous location". The detail at level ``j`` of a signal sampled at ``fs`` holds the octave
-    ``fs / 2^(j+1) .. fs / 2^j``. Instead of a fixed rate, each bout is resampled to ``fs = f_step 2^(j + 1/2)`` so
-    that its step frequency ``f_step`` (from the autocorrelation, see :mod:`pdr.steps.gait`) sits at the geometric
-    centre of the kept octave: the stride frequency (``f_step / 2``, dominant for a thigh or arm sensor) and the
-    second harmonic (``2 f_step``, the double heel/sole peak) both fall outside it. The stationary wavelet transform
+    ``fs / 2^(j+1) .. fs / 2^j``. Instead of a fixed rate, each bout is resampled at ``fs = f_step 2^(j + 1/2)``
+    (uniform in gait phase, ``f_step`` following the cadence of the sliding autocorrelation windows, see
+    :mod:`pdr.steps.gait`) so that the step frequency sits at the geometric centre of the kept octave: the stride
+    frequency (``f_step / 2``, dominant for a thigh sensor) and the second harmonic (``2 f_step``, the double heel/sole peak) both fall outside it. The stationary wavelet transform
     is used so that the result does not depend on where the recording starts. A maximum is then moved to the
     largest acceleration norm within a quarter step (the impact of the foot contact).
 
@@ -131,6 +131,8 @@ class WaveletStepDetection(Algorithm):
     def _check(self, rate_hz: float) -> None:
         if not (0 < self.min_step_freq_hz < self.max_step_freq_hz):
             raise InputError(f"steps: expected 0 < min_step_freq_hz < max_step_freq_hz, found {self.min_step_freq_hz}, {self.max_step_freq_hz}")
+        if self.signal not in DETECTION_SIGNALS:
+            raise InputError(f"steps: expected signal one of {', '.join(DETECTION_SIGNALS)}, found {self.signal!r}")
         if int(self.level) != self.level or not 1 <= self.level <= 8:
             raise InputError(f"steps: expected an integer level in 1..8, found {self.level}")
 
