@@ -132,6 +132,10 @@ def test_wavelet_rejects_bad_params():
         WaveletStepDetection().detect(imu.to_numpy())
     with pytest.raises(InputError, match="increasing"):
         WaveletStepDetection().detect(imu.iloc[::-1])
+    bad = imu.copy()
+    bad.loc[100:120, "acc_x_mps2"] = np.nan
+    with pytest.raises(InputError, match="finite"):
+        PeakStepDetection().detect(bad)
 
 
 @settings(max_examples=8, deadline=None)
