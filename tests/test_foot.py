@@ -260,6 +260,8 @@ def test_foot_strides_of_two_feet():
     assert out["t_start_s"].is_monotonic_increasing
     walking = out[(out["t_end_s"] - out["t_start_s"]) < 1.5]
     assert np.abs(walking["length_m"] - 1.4).max() < 0.02
+    assert walking["calibrated"].mean() > 0.8
+    assert np.abs(walking["heading_change_rad"].dropna()).max() < 0.02  # a straight walk
     fst = foot_strides(rec, {"foot": {"method": "footstep_tracker", "footstep_tracker": {"attitude": "full"}}})
     assert np.abs(fst[(fst["t_end_s"] - fst["t_start_s"]) < 1.5]["length_m"] - 1.4).max() < 0.03
 
@@ -315,6 +317,10 @@ def test_foot_config_errors():
         foot_strides(rec, {"foot": {"mehtod": "zupt_ins"}})
     with pytest.raises(InputError, match="unknown parameter"):
         foot_strides(rec, {"foot": {"zupt_ins": {"acc_noise": 1.0}}})
+    with pytest.raises(InputError, match="attitude"):
+        foot_strides(rec, {"foot": {"method": "footstep_tracker", "footstep_tracker": {"attitude": "6dof"}}})
+    with pytest.raises(InputError, match="integrate_from"):
+        FootStepTrackerStride(integrate_from="landing").estimate(rec.imu)
 
 
 # ---------------------------------------------------------------------------------------------------------------

@@ -64,7 +64,7 @@ def check_pair(left: pd.DataFrame, right: pd.DataFrame, *, max_offset_s: float =
             f"left/right foot IMUs: expected one shared clock, found disjoint time spans "
             f"(left {tl[0]:.3f}-{tl[-1]:.3f} s, right {tr[0]:.3f}-{tr[-1]:.3f} s)"
         )
-    if max(dl, dr) > max_length_ratio * min(dl, dr) or abs(tl[0] - tr[0]) > max_offset_s + 0.5 * max(dl, dr):
+    if max(dl, dr) > max_length_ratio * min(dl, dr):
         raise InputError(
             f"left/right foot IMUs: expected one shared clock and about the same span, found left "
             f"{tl[0]:.3f}-{tl[-1]:.3f} s ({len(tl)} samples) and right {tr[0]:.3f}-{tr[-1]:.3f} s ({len(tr)} samples)"

@@ -10,6 +10,7 @@ import pandas as pd
 
 from pdr.base import Algorithm
 from pdr.constants import GRAVITY_MPS2
+from pdr.errors import InputError
 from pdr.foot._checks import foot_imu_arrays
 from pdr.foot._rotations import align_to_gravity, cumulative_rotations
 from pdr.foot.frame import estimate_foot_frame
@@ -43,8 +44,13 @@ class FootStepTrackerStride(Algorithm):
     zero_acc_mps2 : |horizontal forward acceleration| at or below this counts as "zero" at rest.
     base_std_m : the stride-length standard deviation of a clean stride (the residual of the method on the
         gaitmap motion-capture strides is about 2-3 cm).
-    drift_std_factor : adds ``factor * |velocity drift at rest| * (T_rest - T_liftoff) / 2`` to the standard
+    drift_std_factor : adds ``factor * |velocity drift at rest| * (T_rest - T_start) / 2`` to the standard
         deviation: the larger the velocity that had to be removed at rest, the less the stride is trusted.
+    attitude : ``"pitch"`` (the seed: the foot only pitches, eq. 2-3) or ``"full"`` (the gyro integrated in 3-D
+        from the uplift, levelled on the rest before it: the same projection without the pitch-only assumption).
+    integrate_from : ``"uplift"`` (default) or ``"liftoff"`` (the seed). On real feet the sensor already moves
+        forward while the heel rises, before a_y turns positive: on the gaitmap strides integrating from the liftoff
+        loses 3-4 cm per stride (benchmark: 8.5 cm MAE against 5.2 cm from the uplift).
     zero_velocity : parameters of the :class:`ZeroVelocityDetection` used for the step segmentation.
 
     Attributes
@@ -75,9 +81,11 @@ class FootStepTrackerStride(Algorithm):
       with the opposite sign of theta); gravity cancels exactly for a pure pitch motion.
     * eq. 1: a_m = a_f cos(phi) + a_x sin(phi), with the toe angle phi of each stride estimated as the direction
       of the horizontal displacement (forward_m, lateral_m) in the foot frame, i.e. the phi that maximises the
-      integrated a_m; the stride length is then the double integral of a_m from T_l to T_r with the velocity
-      brought to zero at T_r by removing a linear drift (the seed integrates to the landing; the foot still moves
-      between landing and rest, so the integration runs on to the rest time).
+      integrated a_m. phi is measured from the foot frame's forward axis (perpendicular to the swing's main
+      rotation axis), so it also absorbs any yaw error of that axis.
+    * the stride length is the double integral of a_m up to T_r with the velocity brought to zero at T_r by
+      removing a linear drift (the seed integrates to the landing; the foot still moves between landing and rest,
+      so the integration runs on to the rest time), starting at T_u or T_l (``integrate_from``).
 
     Examples
     --------
@@ -99,6 +107,11 @@ class FootStepTrackerStride(Algorithm):
 
     def estimate(self, imu: pd.DataFrame, stance: ZeroVelocityDetection | None = None) -> FootStepTrackerStride:
         """Stride lengths of one foot IMU (canonical IMU table); ``stance`` reuses a detection already made."""
+        if self.attitude not in ("pitch", "full"):
+            raise InputError(f"FootStepTrackerStride: expected attitude 'pitch' or 'full', found {self.attitude!r}")
+        if self.integrate_from not in ("uplift", "liftoff"):
+            raise InputError(f"FootStepTrackerStride: expected integrate_from 'uplift' or 'liftoff', "
+                             f"found {self.integrate_from!r}")
         t, acc, gyr = foot_imu_arrays(imu, f"{self.foot} foot IMU")
         self.stance_ = stance if stance is not None else ZeroVelocityDetection(**(self.zero_velocity or {})).detect(imu)
         st = self.stance_.stances_

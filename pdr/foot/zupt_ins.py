@@ -16,7 +16,7 @@ from pdr.foot.footstep_tracker import empty_strides
 from pdr.foot.zero_velocity import ZeroVelocityDetection
 
 INS_STRIDE_COLUMNS = ["t_start_s", "t_end_s", "foot", "length_m", "length_std_m", "source", "dx_m", "dy_m", "dz_m",
-                      "heading_rad"]
+                      "heading_rad", "heading_change_rad"]
 TRAJECTORY_COLUMNS = ["t_s", "x_m", "y_m", "z_m", "vx_mps", "vy_mps", "vz_mps"]
 
 
@@ -78,7 +78,8 @@ class ZuptInsStride(Algorithm):
         local level frame (z up; x/y keep the yaw of the sensor at the first stance, since a foot IMU alone cannot
         observe the absolute heading).
     strides_ : strides table (INTERFACES.md) plus ``dx_m, dy_m, dz_m`` (displacement between consecutive mid-stances
-        of this foot) and ``heading_rad`` (direction of the displacement, in the local frame); ``length_m`` is the
+        of this foot), ``heading_rad`` (direction of the displacement, in the local frame) and
+        ``heading_change_rad`` (since the previous stride of this foot; NaN for the first); ``length_m`` is the
         horizontal distance, ``length_std_m`` from the filter covariance.
     position_cov_m2_ : (K, 3, 3) position covariance at each mid-stance.
     final_position_m_ : position (3,) at the middle of the last stance.
@@ -247,8 +248,9 @@ class ZuptInsStride(Algorithm):
         dcov = cov[1:, :2, :2] - cov[:-1, :2, :2]
         var = np.einsum("ni,nij,nj->n", u, dcov, u)
         std = np.sqrt(np.maximum(var, 0.0) + self.min_length_std_m**2)
+        heading = np.arctan2(d[:, 1], d[:, 0])
         return pd.DataFrame({
             "t_start_s": t_mid[:-1], "t_end_s": t_mid[1:], "foot": self.foot, "length_m": length,
             "length_std_m": std, "source": "foot_imu", "dx_m": d[:, 0], "dy_m": d[:, 1], "dz_m": d[:, 2],
-            "heading_rad": np.arctan2(d[:, 1], d[:, 0]),
+            "heading_rad": heading, "heading_change_rad": np.r_[np.nan, np.diff(np.unwrap(heading))],
         })[INS_STRIDE_COLUMNS]

@@ -37,10 +37,6 @@ def foot_imus(rec: Recording) -> dict[str, pd.DataFrame]:
             if placement in ("foot_left", "foot_right")}
 
 
-def _empty() -> pd.DataFrame:
-    return pd.DataFrame({c: pd.Series(dtype=object if c in ("foot", "source") else float) for c in STRIDE_COLUMNS})
-
-
 def _saturation(imu: pd.DataFrame, foot: str) -> np.ndarray:
     """Samples where the gyroscope or the accelerometer sits at its range (warns when any)."""
     _, acc, gyr = foot_imu_arrays(imu, f"{foot} foot IMU")
@@ -58,7 +54,9 @@ def _saturation(imu: pd.DataFrame, foot: str) -> np.ndarray:
 def foot_strides(rec: Recording, config: dict) -> pd.DataFrame | None:
     """Strides table (INTERFACES.md; ``source = "foot_imu"``) of the foot IMUs of ``rec``; None without a foot IMU.
 
-    Extra columns: ``method`` and ``calibrated`` (double-feet calibration applied to the stride).
+    Extra columns: ``method``, ``heading_change_rad`` (the change of the stride direction since the previous stride of
+    the same foot, from the foot INS; NaN for the first stride of a foot and for ``footstep_tracker``) and
+    ``calibrated`` (the double-feet calibration was applied to the stride).
     """
     imus = foot_imus(rec)
     if not imus:
@@ -84,13 +82,14 @@ def foot_strides(rec: Recording, config: dict) -> pd.DataFrame | None:
             t_sat = t[saturated]
             hit = np.array([((t_sat >= a) & (t_sat <= b)).any() for a, b in zip(strides["t_start_s"], strides["t_end_s"])])
             strides = strides[~hit]
-        tables.append(strides[STRIDE_COLUMNS].assign(method=method))
-    out = pd.concat(tables, ignore_index=True) if tables else _empty()
+        extra = strides["heading_change_rad"] if "heading_change_rad" in strides else np.nan
+        tables.append(strides[STRIDE_COLUMNS].assign(method=method, heading_change_rad=extra))
+    out = pd.concat(tables, ignore_index=True)
     out = out.sort_values("t_start_s", kind="stable").reset_index(drop=True)
     out["calibrated"] = False
     if section.get("double_feet", True) and out["foot"].nunique() == 2:
         cal = DoubleFeetCalibration.from_config(section.get("double_feet_calibration")).estimate(out)
-        out = cal.strides_[[*STRIDE_COLUMNS, "method", "calibrated"]]
+        out = cal.strides_[[*STRIDE_COLUMNS, "method", "heading_change_rad", "calibrated"]]
     if len(out) == 0:
         warnings.warn("foot IMU: no stride found (the feet never rest, or fewer than two stances)", stacklevel=2)
     return out.reset_index(drop=True)
