@@ -260,7 +260,7 @@ def test_foot_strides_of_two_feet():
     assert out["t_start_s"].is_monotonic_increasing
     walking = out[(out["t_end_s"] - out["t_start_s"]) < 1.5]
     assert np.abs(walking["length_m"] - 1.4).max() < 0.02
-    assert walking["calibrated"].mean() > 0.8
+    assert walking["calibrated"].sum() >= len(walking) - 4  # not next to the long first and last strides
     assert np.abs(walking["heading_change_rad"].dropna()).max() < 0.02  # a straight walk
     fst = foot_strides(rec, {"foot": {"method": "footstep_tracker", "footstep_tracker": {"attitude": "full"}}})
     assert np.abs(fst[(fst["t_end_s"] - fst["t_start_s"]) < 1.5]["length_m"] - 1.4).max() < 0.03
