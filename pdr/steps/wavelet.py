@@ -103,7 +103,8 @@ class WaveletStepDetection(Algorithm):
     :mod:`pdr.steps.gait`) so that the step frequency sits at the geometric centre of the kept octave: the stride
     frequency (``f_step / 2``, dominant for a thigh sensor) and the second harmonic (``2 f_step``, the double heel/sole peak) both fall outside it. The stationary wavelet transform
     is used so that the result does not depend on where the recording starts. A maximum is then moved to the
-    largest acceleration norm within a quarter step (the impact of the foot contact).
+    largest acceleration norm within a quarter step (the impact of the foot contact), and dropped when |a| barely
+    varies over the step around it (its standard deviation below ``min_acc_std_mps2``, the bout detector's rest test).
 
     Example
     -------
@@ -153,6 +154,7 @@ class WaveletStepDetection(Algorithm):
                                        min_periodicity=self.min_periodicity, stride_check=self.stride_check)
         bouts = bouts_from_mask(walking, u.valid, u.rate_hz, min_bout_s=self.min_bout_steps * min_step_s,
                                 pad_s=self.bout_pad_s)
+        sums = (np.concatenate([[0.0], np.cumsum(x)]), np.concatenate([[0.0], np.cumsum(x * x)]))
         times, bout_ids, rows = [], [], []
         bout_id = 0
         for a, b in bouts:
@@ -163,7 +165,7 @@ class WaveletStepDetection(Algorithm):
             step_s = float(np.median(p))
             local = period[a:b] if self.track_cadence else np.full(b - a, step_s)
             local = moving_average(np.where(np.isfinite(local), local, step_s), int(round(self.bout_window_s * u.rate_hz)))
-            t_peaks = self._bout_steps(u, x, a, b, local)
+            t_peaks = self._bout_steps(u, x, a, b, local, sums)
             for seg in self._split_stops(t_peaks, step_s, max_step_s):
                 if len(seg) < self.min_bout_steps:
                     continue
@@ -176,7 +178,8 @@ class WaveletStepDetection(Algorithm):
             self.bouts_ = pd.DataFrame(rows, columns=BOUT_COLUMNS)
         return self
 
-    def _bout_steps(self, u: UniformImu, x: np.ndarray, a: int, b: int, period_s: np.ndarray) -> np.ndarray:
+    def _bout_steps(self, u: UniformImu, x: np.ndarray, a: int, b: int, period_s: np.ndarray,
+                    sums: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
         """Maxima of the level-``level`` detail, the bout resampled so the detail octave is centred on the cadence.
 
         ``period_s`` is the step period at each sample of the bout; the bout is resampled at a uniform *gait phase*
@@ -207,9 +210,10 @@ class WaveletStepDetection(Algorithm):
         amp = detail[k]
         k = k[amp >= self.min_peak_ratio * np.median(amp)]
         tk = np.interp(k + parabolic_offset(detail, k), np.arange(n_out), tt)
-        return self._refine_to_impact(u, x, tk, np.interp(tk, t, period_s))
+        return self._refine_to_impact(u, x, tk, np.interp(tk, t, period_s), sums)
 
-    def _refine_to_impact(self, u: UniformImu, x: np.ndarray, tk: np.ndarray, step_s: np.ndarray) -> np.ndarray:
+    def _refine_to_impact(self, u: UniformImu, x: np.ndarray, tk: np.ndarray, step_s: np.ndarray,
+                          sums: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
         """Move each maximum to the largest |a| within a quarter step (the contact impact)."""
         half = np.maximum(1, np.round(0.25 * step_s * u.rate_hz).astype(int))
         centre = np.clip(np.round((tk - u.t_s[0]) * u.rate_hz).astype(int), 0, len(x) - 1)
@@ -218,9 +222,17 @@ class WaveletStepDetection(Algorithm):
         score = np.where(np.abs(offs)[None, :] <= half[:, None], x[idx], -np.inf)
         best = idx[np.arange(len(idx)), np.argmax(score, axis=1)]
         tb = u.t_s[best] + parabolic_offset(x, best) / u.rate_hz
-        tb = np.sort(tb)
-        keep = np.concatenate([[True], np.diff(tb) >= 0.5 * np.interp(tb[1:], tk, step_s)])
-        return tb[keep]
+        order = np.argsort(tb)
+        tb, step_s = tb[order], step_s[order]
+        keep = np.concatenate([[True], np.diff(tb) >= 0.5 * step_s[1:]])
+        tb, step_s = tb[keep], step_s[keep]
+        # the rest test of the bout detector, per step: |a| must vary over the step around the contact
+        i0 = np.clip(np.round((tb - 0.5 * step_s - u.t_s[0]) * u.rate_hz).astype(int), 0, len(x) - 1)
+        i1 = np.clip(np.round((tb + 0.5 * step_s - u.t_s[0]) * u.rate_hz).astype(int) + 1, 1, len(x))
+        c1, c2 = sums
+        cnt = np.maximum(i1 - i0, 1)
+        var = (c2[i1] - c2[i0]) / cnt - ((c1[i1] - c1[i0]) / cnt) ** 2
+        return tb[var >= self.min_acc_std_mps2 ** 2]
 
     @staticmethod
     def _split_stops(t: np.ndarray, step_s: float, max_step_s: float) -> list[np.ndarray]:
