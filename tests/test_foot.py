@@ -254,16 +254,18 @@ def test_double_feet_gate_keeps_a_stride_the_other_foot_contradicts():
 
 def test_foot_strides_of_two_feet():
     rec = _two_feet()
-    out = foot_strides(rec, {"foot": {"method": "zupt_ins"}})
+    out = foot_strides(rec, {"foot": {"method": "zupt_ins", "double_feet": True}})
     assert list(out.columns)[:6] == STRIDE_COLUMNS
     assert set(out["foot"]) == {"left", "right"} and (out["source"] == "foot_imu").all()
     assert out["t_start_s"].is_monotonic_increasing
     walking = out[(out["t_end_s"] - out["t_start_s"]) < 1.5]
     assert np.abs(walking["length_m"] - 1.4).max() < 0.02
-    assert walking["calibrated"].sum() >= len(walking) - 4  # not next to the long first and last strides
+    assert out["calibrated"].iloc[2:-2].all()  # gait initiation and termination: the feet disagree, gated
     assert np.abs(walking["heading_change_rad"].dropna()).max() < 0.02  # a straight walk
+    assert not foot_strides(rec, {})["calibrated"].any()  # the INS alone by default
     fst = foot_strides(rec, {"foot": {"method": "footstep_tracker", "footstep_tracker": {"attitude": "full"}}})
     assert np.abs(fst[(fst["t_end_s"] - fst["t_start_s"]) < 1.5]["length_m"] - 1.4).max() < 0.03
+    assert fst["calibrated"].sum() >= len(fst) - 2
 
 
 def test_foot_strides_single_foot_and_none():

@@ -18,7 +18,8 @@ from pdr.foot.zero_velocity import ZeroVelocityDetection
 
 CRITICAL_COLUMNS = ["t_uplift_s", "t_liftoff_s", "t_landing_s", "t_rest_s", "i_uplift", "i_liftoff", "i_landing", "i_rest"]
 STRIDE_COLUMNS = ["t_start_s", "t_end_s", "foot", "length_m", "length_std_m", "source", "forward_m", "lateral_m",
-                  "height_change_m", "toe_angle_rad", "max_pitch_rad", "t_liftoff_s", "t_landing_s"]
+                  "height_change_m", "toe_angle_rad", "max_pitch_rad", "t_liftoff_s", "t_landing_s", "t_swing_start_s",
+                  "t_swing_end_s"]
 
 
 def empty_strides(columns: list[str] = STRIDE_COLUMNS) -> pd.DataFrame:
@@ -60,7 +61,8 @@ class FootStepTrackerStride(Algorithm):
     strides_ : the strides table (INTERFACES.md: ``t_start_s, t_end_s, foot, length_m, length_std_m, source``) plus
         ``forward_m, lateral_m`` (displacement along / across the foot direction), ``height_change_m``,
         ``toe_angle_rad`` (angle from the foot direction to the moving direction, positive towards the foot
-        frame's x axis, i.e. to the right), ``max_pitch_rad``, ``t_liftoff_s, t_landing_s``. A stride runs
+        frame's x axis, i.e. to the right), ``max_pitch_rad``, ``t_liftoff_s, t_landing_s``,
+        ``t_swing_start_s, t_swing_end_s`` (the integration interval: where the foot moves). A stride runs
         from one mid-stance to the next of the same foot.
     foot_frame_ : (3, 3) rotation from the sensor frame to the foot frame (x pitch axis, y forward, z up).
     toe_angle_rad_ : median toe-in/out angle of the recording (NaN without strides).
@@ -161,7 +163,7 @@ class FootStepTrackerStride(Algorithm):
             std = float(np.hypot(self.base_std_m, self.drift_std_factor * drift_m))
             crit.append((t[iu], t[il], t[idn], t[ir], iu, il, idn, ir))
             rows.append((t[lo], t[hi], self.foot, float(length), std, "foot_imu", float(d[0]), float(d[1]),
-                         float(d[2]), phi, float(np.max(np.abs(theta))), t[il], t[idn]))
+                         float(d[2]), phi, float(np.max(np.abs(theta))), t[il], t[idn], t[iu + j], t[ir]))
         self.critical_times_ = pd.DataFrame(crit, columns=CRITICAL_COLUMNS)
         self.strides_ = pd.DataFrame(rows, columns=STRIDE_COLUMNS)
         self.toe_angle_rad_ = float(np.median(self.strides_["toe_angle_rad"]))

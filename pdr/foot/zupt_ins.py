@@ -16,7 +16,7 @@ from pdr.foot.footstep_tracker import empty_strides
 from pdr.foot.zero_velocity import ZeroVelocityDetection
 
 INS_STRIDE_COLUMNS = ["t_start_s", "t_end_s", "foot", "length_m", "length_std_m", "source", "dx_m", "dy_m", "dz_m",
-                      "heading_rad", "heading_change_rad"]
+                      "heading_rad", "heading_change_rad", "t_swing_start_s", "t_swing_end_s"]
 TRAJECTORY_COLUMNS = ["t_s", "x_m", "y_m", "z_m", "vx_mps", "vy_mps", "vz_mps"]
 
 
@@ -79,7 +79,8 @@ class ZuptInsStride(Algorithm):
         observe the absolute heading).
     strides_ : strides table (INTERFACES.md) plus ``dx_m, dy_m, dz_m`` (displacement between consecutive mid-stances
         of this foot), ``heading_rad`` (direction of the displacement, in the local frame) and
-        ``heading_change_rad`` (since the previous stride of this foot; NaN for the first); ``length_m`` is the
+        ``heading_change_rad`` (since the previous stride of this foot; NaN for the first),
+        ``t_swing_start_s, t_swing_end_s`` (the swing between the two stances); ``length_m`` is the
         horizontal distance, ``length_std_m`` from the filter covariance.
     position_cov_m2_ : (K, 3, 3) position covariance at each mid-stance.
     final_position_m_ : position (3,) at the middle of the last stance.
@@ -208,7 +209,7 @@ class ZuptInsStride(Algorithm):
         pos, cov = ep_p[mid_ep], ep_P[mid_ep][:, 0:3, 0:3]
         self.position_cov_m2_ = cov
         self.final_position_m_ = pos[-1]
-        self.strides_ = self._strides(t[mids], pos, cov)
+        self.strides_ = self._strides(t[mids], pos, cov, st["t_end_s"].to_numpy(), st["t_start_s"].to_numpy())
         return self
 
     def _epochs(self, st: pd.DataFrame, i0: int, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -239,7 +240,8 @@ class ZuptInsStride(Algorithm):
         return pd.DataFrame({"t_s": t, "x_m": p[:, 0], "y_m": p[:, 1], "z_m": p[:, 2],
                              "vx_mps": v[:, 0], "vy_mps": v[:, 1], "vz_mps": v[:, 2]})
 
-    def _strides(self, t_mid: np.ndarray, pos: np.ndarray, cov: np.ndarray) -> pd.DataFrame:
+    def _strides(self, t_mid: np.ndarray, pos: np.ndarray, cov: np.ndarray, stance_end: np.ndarray,
+                 stance_start: np.ndarray) -> pd.DataFrame:
         if len(t_mid) < 2:
             return empty_strides(INS_STRIDE_COLUMNS)
         d = np.diff(pos, axis=0)
@@ -253,4 +255,5 @@ class ZuptInsStride(Algorithm):
             "t_start_s": t_mid[:-1], "t_end_s": t_mid[1:], "foot": self.foot, "length_m": length,
             "length_std_m": std, "source": "foot_imu", "dx_m": d[:, 0], "dy_m": d[:, 1], "dz_m": d[:, 2],
             "heading_rad": heading, "heading_change_rad": np.r_[np.nan, np.diff(np.unwrap(heading))],
+            "t_swing_start_s": stance_end[:-1], "t_swing_end_s": stance_start[1:],
         })[INS_STRIDE_COLUMNS]
