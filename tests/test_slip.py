@@ -33,7 +33,7 @@ def test_falling_model_returns_none():
 
 def test_kinematics_lengths_contact_and_flow():
     step = simulate_step(1.3, -0.2, math.radians(15), 12000.0, BODY)
-    kin = stride_kinematics(step, BODY, 0.3, stance_fraction=0.6, swing_profile="smooth")
+    kin = stride_kinematics(step, BODY, 0.3, stance_fraction=0.6, swing_profile="heel")
     np.testing.assert_allclose(np.hypot(*(kin.knee_m - kin.hip_m).T), BODY.thigh_length_m, atol=1e-9)
     np.testing.assert_allclose(np.hypot(*(kin.heel_m - kin.knee_m).T), BODY.shank_length_m, atol=1e-9)
     heel = kin.heel_m[kin.phase == 0]

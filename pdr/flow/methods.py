@@ -215,6 +215,8 @@ class CorrelationOpticalFlow(_FrameFlow):
     blur_sigma_px : Gaussian pre-blur (thesis: sigma 1).
     subpixel : refine each peak by a parabola through its neighbours.
     predict : centre each search zone on the previous pair's shift (tracks fast motion with a small zone).
+    consensus_px : patches farther than this from the median patch shift are dropped before the weighted mean
+        (a repeated pattern such as brick joints can lock a patch one period off); inf keeps all, as the thesis.
 
     Attributes
     ----------
@@ -235,7 +237,8 @@ class CorrelationOpticalFlow(_FrameFlow):
     """
 
     def __init__(self, *, patch_px: int = 24, grid_step_px: int = 24, max_shift_px: int = 12,
-                 min_peak_corr: float = 0.5, blur_sigma_px: float = 1.0, subpixel: bool = True, predict: bool = False):
+                 min_peak_corr: float = 0.5, blur_sigma_px: float = 1.0, subpixel: bool = True, predict: bool = False,
+                 consensus_px: float = 1.5):
         self.patch_px = patch_px
         self.grid_step_px = grid_step_px
         self.max_shift_px = max_shift_px
@@ -243,6 +246,7 @@ class CorrelationOpticalFlow(_FrameFlow):
         self.blur_sigma_px = blur_sigma_px
         self.subpixel = subpixel
         self.predict = predict
+        self.consensus_px = consensus_px
 
     def _reset(self) -> None:
         self._last = (0, 0)
@@ -300,6 +304,11 @@ class CorrelationOpticalFlow(_FrameFlow):
             return float("nan"), float("nan"), 0.0
         wts = np.asarray(weights)
         sh = np.asarray(shifts)
+        # consensus: a patch locked on a repeated pattern (brick joints) disagrees with the median; drop it
+        med = np.median(sh, axis=0)
+        keep = np.hypot(*(sh - med).T) <= self.consensus_px
+        if keep.any():
+            wts, sh = wts[keep], sh[keep]
         dx, dy = (wts[:, None] * sh).sum(axis=0) / wts.sum()
         self._last = (int(round(dx)), int(round(dy)))
         quality = float(wts.mean() * len(wts) / n_patches)

@@ -98,7 +98,11 @@ class SlipOpticalFlowStride(Algorithm):
     focal_px : focal length of the camera in pixels.
     swing_ratio : eta, shank swing peak over its toe-off angle (eq. 3.16).
     swing_peak_fraction : where in the swing the shank angle peaks (thesis Appendix E: 1/4).
-    swing_profile : "parabola" (thesis eq. 3.17) or "smooth" (shank at rest at heel strike; default).
+    swing_profile : "parabola" (thesis eq. 3.17) or "heel" (heel path and inverse kinematics; default).
+    swing_clearance_ratio : peak heel lift in swing over the stride length, for the "heel" profile (a per-user
+        body parameter, see ``calibrate``).
+    integral_weight : weight of the per-stride mean-flow difference (the image displacement of the stride,
+        which fixes the stride length through f / D) relative to the sample-by-sample differences.
     strides_per_fit : strides fitted together (thesis: 2, assumed equal).
     n_refine : best starts (grid and Table 2) refined by the local optimiser.
     max_evals : function evaluations per local refinement.
@@ -134,9 +138,10 @@ class SlipOpticalFlowStride(Algorithm):
 
     def __init__(self, *, thigh_length_m: float = 0.5, shank_length_m: float = 0.6, foot_length_m: float = 0.2,
                  mass_kg: float = 50.0, camera_from_knee_m: float = 0.28, focal_px: float = 1340.0,
-                 swing_ratio: float = 1.2, swing_peak_fraction: float = 0.25, swing_profile: str = "smooth",
+                 swing_ratio: float = 1.2, swing_peak_fraction: float = 0.25, swing_profile: str = "heel", swing_clearance_ratio: float = 0.05,
+                 integral_weight: float = 100.0,
                  strides_per_fit: int = 2,
-                 n_refine: int = 2, max_evals: int = 60, duration_weight: float = 50.0, length_scale: float = 1.0,
+                 n_refine: int = 2, max_evals: int = 60, duration_weight: float = 0.0, length_scale: float = 1.0,
                  model_sigma_fraction: float = 0.03, min_quality: float = 0.3, foot: str = "left"):
         self.thigh_length_m = thigh_length_m
         self.shank_length_m = shank_length_m
@@ -147,6 +152,8 @@ class SlipOpticalFlowStride(Algorithm):
         self.swing_ratio = swing_ratio
         self.swing_peak_fraction = swing_peak_fraction
         self.swing_profile = swing_profile
+        self.swing_clearance_ratio = swing_clearance_ratio
+        self.integral_weight = integral_weight
         self.strides_per_fit = strides_per_fit
         self.n_refine = n_refine
         self.max_evals = max_evals
@@ -169,21 +176,26 @@ class SlipOpticalFlowStride(Algorithm):
             return None
         kin = stride_kinematics(step, self.body, self.camera_from_knee_m, stance_fraction=stance_fraction,
                                 swing_ratio=self.swing_ratio, swing_peak_fraction=self.swing_peak_fraction,
-                                swing_profile=self.swing_profile, dt_s=dt_s)
+                                swing_profile=self.swing_profile,
+                                swing_clearance_m=self.swing_clearance_ratio * 2.0 * step.length_m, dt_s=dt_s)
         if kin.heel_m[:, 1].min() < -0.1 or not np.isfinite(kin.distance_m).all():
             return None  # the swing foot goes through the floor, or the camera looks above the horizon
         return kin.t_s, simulate_flow(kin, self.focal_px), kin.length_m, kin.duration_s
 
-    @staticmethod
-    def _residuals(sim, windows) -> np.ndarray | None:
-        """Quality-weighted differences, the simulated stride warped onto each measured stride."""
+    def _residuals(self, sim, windows) -> np.ndarray | None:
+        """Quality-weighted differences, the simulated stride warped onto each measured stride, and per stride
+        the difference of the mean flows (weighted by ``integral_weight`` and the stride's sample count)."""
         if sim is None:
             return None
         tau, fsim, _, tsim = sim
+        mean_sim = float(np.trapezoid(fsim, tau)) / tsim
         out = []
         for t, f, w, t0, tm in windows:
             scale = tsim / tm
-            out.append(np.sqrt(w) * (f - scale * np.interp((t - t0) * scale, tau, fsim)))
+            r = np.sqrt(w) * (f - scale * np.interp((t - t0) * scale, tau, fsim))
+            mean_meas = float(np.sum(w * f) / max(np.sum(w), 1e-9))
+            out.append(r)
+            out.append([math.sqrt(self.integral_weight * len(t)) * (mean_meas - mean_sim * scale)])
         return np.concatenate(out)
 
     # -- estimation ------------------------------------------------------------------------------------------------
@@ -334,12 +346,29 @@ class SlipOpticalFlowStride(Algorithm):
                     meas_duration_s=tm_total / len(windows), stance_fraction=stance, length_m=length_m,
                     length_std_m=sigma, time_s=_time.perf_counter() - t0)
 
-    @staticmethod
-    def calibrate_length_scale(estimated_m, true_m) -> float:
-        """Per-user factor ``length_scale`` from strides of known length (least squares through the origin)."""
-        e = np.asarray(estimated_m, float)
-        tr = np.asarray(true_m, float)
-        ok = np.isfinite(e) & np.isfinite(tr)
-        if ok.sum() < 1:
-            raise InputError("calibrate_length_scale: expected at least one pair of finite stride lengths, found none")
-        return float(np.sum(e[ok] * tr[ok]) / np.sum(e[ok] ** 2))
+
+def calibrate_slip_body(estimator: SlipOpticalFlowStride, t_s, forward_flow_pxps, quality, *, true_length_m: float,
+                        clearance_grid: tuple[float, ...] = (0.03, 0.04, 0.05, 0.06, 0.07)) -> SlipOpticalFlowStride:
+    """Per-user body calibration on one walk of known mean stride length; returns a calibrated copy.
+
+    The swing heel clearance ratio is chosen from ``clearance_grid`` (the one whose mean fitted stride is closest
+    to the truth), then ``length_scale`` absorbs what is left. Fit once per user, reuse on every later walk (the
+    thesis' parameters of Table 1 are per-user measurements in the same spirit).
+    """
+    if not (isinstance(true_length_m, (int, float)) and math.isfinite(true_length_m) and true_length_m > 0):
+        raise InputError(f"calibrate_slip_body: expected a positive true_length_m, found {true_length_m!r}")
+    best = None
+    for ratio in clearance_grid:
+        est = SlipOpticalFlowStride(**{**estimator.get_params(), "swing_clearance_ratio": ratio, "length_scale": 1.0})
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            est.estimate(t_s, forward_flow_pxps, quality)
+        if est.strides_.empty:
+            continue
+        mean = float(est.strides_.length_m.mean())
+        if best is None or abs(mean - true_length_m) < abs(best[1] - true_length_m):
+            best = (ratio, mean)
+    if best is None:
+        raise InputError("calibrate_slip_body: expected strides in the calibration walk's flow, found none")
+    return SlipOpticalFlowStride(**{**estimator.get_params(), "swing_clearance_ratio": best[0],
+                                    "length_scale": true_length_m / best[1]})

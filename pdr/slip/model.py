@@ -175,7 +175,7 @@ class StrideKinematics:
 
 def stride_kinematics(step: SlipStep, body: SlipBody, camera_from_knee_m: float, *, stance_fraction: float = 0.6,
                       swing_ratio: float = 1.2, swing_peak_fraction: float = 0.25, swing_profile: str = "parabola",
-                      dt_s: float = 0.002) -> StrideKinematics:
+                      swing_clearance_m: float = 0.12, dt_s: float = 0.002) -> StrideKinematics:
     """Leg kinematics of the camera leg in the three configurations (eq. 3.7-3.17).
 
     Parameters
@@ -184,8 +184,11 @@ def stride_kinematics(step: SlipStep, body: SlipBody, camera_from_knee_m: float,
     stance_fraction : toe off as a fraction of the stride (thesis code: 0.6).
     swing_ratio : eta = theta_max / theta_int of the shank in swing (eq. 3.16, thesis 1.2).
     swing_peak_fraction : where in the swing the parabola reaches eta theta_int (thesis Appendix E: 1/4).
-    swing_profile : "parabola" (eq. 3.17, the thesis) or "smooth" (cosine segments through the same three
-        angles, the shank at rest at the peak and at heel strike, as in real terminal swing).
+    swing_profile : "parabola" (eq. 3.16-3.17, the thesis: thigh angle linear, shank angle a parabola) or
+        "heel" (the thesis' proposed refinement of the hip-to-shank kinematics: the heel travels from its
+        toe-off position to the next heel strike, x_H + 2 step, on a minimum-jerk path lifted by a clearance
+        bump peaking at a third of the swing; knee and shank from the hip by inverse kinematics).
+    swing_clearance_m : peak heel lift of the "heel" swing (a per-user body parameter).
 
     Notes
     -----
@@ -237,20 +240,25 @@ def stride_kinematics(step: SlipStep, body: SlipBody, camera_from_knee_m: float,
         delta = math.atan2(step.heel_x_m, step.crit_height_m)
         ts, te = t[i0], T
         tau = (t[m2] - ts) / (te - ts)
-        th1 = th1_0 + (delta - th1_0) * tau
-        p = float(np.clip(swing_peak_fraction, 0.05, 0.95))
-        th_peak = swing_ratio * th2_0
-        if swing_profile == "parabola":  # eq. 3.17: through (0, th2_0), (p, eta th2_0), (1, delta)
+        if swing_profile == "parabola":  # eq. 3.16-3.17: thigh linear, shank through th2_0, eta th2_0, delta
+            th1 = th1_0 + (delta - th1_0) * tau
+            p = float(np.clip(swing_peak_fraction, 0.05, 0.95))
             a_mat = np.array([[0.0, 0.0, 1.0], [p * p, p, 1.0], [1.0, 1.0, 1.0]])
-            c2 = np.linalg.solve(a_mat, np.array([th2_0, th_peak, delta]))
+            c2 = np.linalg.solve(a_mat, np.array([th2_0, swing_ratio * th2_0, delta]))
             th2 = c2[0] * tau ** 2 + c2[1] * tau + c2[2]
-        else:  # smooth: cosine ease to the peak, then a cosine swing to delta, at rest at heel strike
-            s1 = np.clip(tau / p, 0.0, 1.0)
-            s2 = np.clip((tau - p) / (1.0 - p), 0.0, 1.0)
-            th2 = np.where(tau <= p, th2_0 + (th_peak - th2_0) * 0.5 * (1 - np.cos(np.pi * s1)),
-                           th_peak + (delta - th_peak) * 0.5 * (1 - np.cos(np.pi * s2)))
-        knee[m2] = hip[m2] + lth * np.column_stack([np.sin(th1), -np.cos(th1)])
-        heel[m2] = knee[m2] + lsh * np.column_stack([np.sin(th2), -np.cos(th2)])
+            knee[m2] = hip[m2] + lth * np.column_stack([np.sin(th1), -np.cos(th1)])
+            heel[m2] = knee[m2] + lsh * np.column_stack([np.sin(th2), -np.cos(th2)])
+        elif swing_profile == "heel":  # heel path from toe off to the next heel strike, knee by inverse kinematics
+            x_hs = step.heel_x_m + 2.0 * step.length_m
+            mj = tau ** 3 * (10.0 - 15.0 * tau + 6.0 * tau ** 2)  # minimum-jerk progress
+            hx = h0[0] + (x_hs - h0[0]) * mj
+            hz = h0[1] * (1.0 - tau) ** 2 + swing_clearance_m * 6.75 * tau * (1.0 - tau) ** 2  # peak at 1/3
+            heel[m2] = np.column_stack([hx, hz])
+            knee[m2] = _two_link_knee(hip[m2], heel[m2], lth, lsh)
+            reach = np.hypot(*(heel[m2] - knee[m2]).T)
+            heel[m2] = knee[m2] + lsh * (heel[m2] - knee[m2]) / reach[:, None]  # out of reach: foot hangs short
+        else:
+            raise InputError(f"stride_kinematics: expected swing_profile 'parabola' or 'heel', found {swing_profile!r}")
     sh = heel - knee
     ang = np.arctan2(sh[:, 0], -sh[:, 1])
     u = sh / lsh

@@ -1,0 +1,163 @@
+"""Leg camera: optical-flow accuracy (thesis ch. 2 tests, real textures), speed, and stride length from rendered walks.
+
+The walks are rendered from ``pdr.sim.camera.FourierLegWalk`` (joint-angle Fourier series, feet that do not slip,
+double support) - a richer model than the SLIP the estimator fits.
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+
+import cv2
+import numpy as np
+
+from pdr.flow import CorrelationOpticalFlow, InterpolationOpticalFlow, PhaseCorrelationOpticalFlow
+from pdr.pipelines.leg_camera import ANKLE_HEIGHT_M, forward_flow
+from pdr.sim.camera import CameraModel, FourierLegWalk, load_texture, render_leg_camera
+from pdr.slip.fit import SlipOpticalFlowStride, calibrate_slip_body
+
+AREA = "leg_camera"
+THESIS = "Liu MS thesis"
+CAM = CameraModel(fps=100.0, focal_px=120.0, cx_px=79.5, cy_px=59.5, width_px=160, height_px=120,
+                  segment="shank_left", distance_from_knee_m=0.25)
+# (stride time s, joint amplitude): about 1.0, 1.2 and 1.5 m strides for 0.45 m thigh and shank
+WALKS = {"1.0m": (1.15, 0.72), "1.2m": (1.10, 0.85), "1.5m": (1.05, 1.0)}
+
+
+def _row(case, metric, ours, unit, target, anchor):
+    return {"area": AREA, "case": case, "metric": metric, "ours": float(ours), "unit": unit, "target": target, "anchor": anchor}
+
+
+def _shift(img, dx):
+    out = np.zeros_like(img)
+    out[:, dx:] = img[:, : img.shape[1] - dx]
+    return out
+
+
+def _flow_rows(quick: bool) -> list[dict]:
+    rows = []
+    rng = np.random.default_rng(0)
+    n = 30 if quick else 100
+    interp = InterpolationOpticalFlow(window_px=20, ref_shift_px=10, patch_px=40, blur_sigma_px=0.0)
+    corr = CorrelationOpticalFlow(patch_px=40, grid_step_px=40, max_shift_px=22, blur_sigma_px=0.0)
+    u_i, u_c = [], []
+    for _ in range(n):
+        im = cv2.GaussianBlur(rng.random((255, 255)) * 255, (0, 0), 1.0).astype(np.float32)
+        im2 = _shift(im, 10)
+        u_i.append(interp.measure_pair(im, im2)[0])
+        u_c.append(corr.measure_pair(im, im2)[0])
+    rows.append(_row("random 255x255, 10 px", "interpolation rel. error of the mean", 100 * abs(np.mean(u_i) - 10) / 10, "%",
+                     "<= 0.5", f"0.46% ({THESIS}, Fig. 3, 100 trials)"))
+    rows.append(_row("random 255x255, 10 px", "correlation max abs error", np.max(np.abs(np.array(u_c) - 10)), "px",
+                     "0 (exact)", f"exact ({THESIS}, Fig. 7)"))
+    for s in (1, 19):
+        est = InterpolationOpticalFlow(window_px=20, ref_shift_px=s, patch_px=40, blur_sigma_px=0.0)
+        u = [est.measure_pair(im := rng.random((255, 255)).astype(np.float32) * 255, _shift(im, s))[0] for _ in range(n)]
+        anchor = "0.03%" if s == 1 else "9.20%"
+        rows.append(_row(f"random 255x255, {s} px", "interpolation rel. error of the mean", 100 * abs(np.mean(u) - s) / s, "%",
+                         "-", f"{anchor} ({THESIS}, Fig. 4)"))
+    for name in ("gravel", "brick"):
+        tex = load_texture(name).astype(np.float32)
+        errs = {"correlation": [], "phase": [], "interpolation (<= 4 px)": []}
+        phase = PhaseCorrelationOpticalFlow(patch_px=200)
+        it = InterpolationOpticalFlow(window_px=40, ref_shift_px=2, patch_px=80, blur_sigma_px=2.0, iterations=4)
+        for s in range(1, 20):
+            m = np.float32([[1, 0, s + 0.3], [0, 1, -0.4]])
+            moved = cv2.warpAffine(tex, m, tex.shape[::-1], flags=cv2.INTER_CUBIC, borderMode=cv2.BORDER_REFLECT)
+            a, b = tex[100:400, 100:400], moved[100:400, 100:400]
+            for key, est in (("correlation", corr), ("phase", phase)):
+                dx, dy, _ = est.measure_pair(a, b)
+                errs[key].append(np.hypot(dx - s - 0.3, dy + 0.4))
+            if s <= 4:
+                dx, dy, _ = it.measure_pair(a, b)
+                errs["interpolation (<= 4 px)"].append(np.hypot(dx - s - 0.3, dy + 0.4))
+        for key, e in errs.items():
+            rows.append(_row(f"{name} texture, shifts 1.3-19.3 px", f"{key} mean abs error", np.mean(e), "px", "-",
+                             "no real-texture test in the thesis"))
+    return rows
+
+
+def _speed_rows() -> list[dict]:
+    tex = cv2.resize(load_texture("gravel"), (1400, 1000))
+    frames = np.stack([tex[100 + 3 * i:580 + 3 * i, 100 + 5 * i:740 + 5 * i] for i in range(61)])
+    t = np.arange(61) / 30.0
+    est = CorrelationOpticalFlow(patch_px=48, grid_step_px=120, max_shift_px=16)
+    est.estimate(frames[:3], t[:3])
+    t0 = time.perf_counter()
+    est.estimate(frames, t)
+    fps = 60 / (time.perf_counter() - t0)
+    return [_row("640x480 video", "correlation flow speed (3x3 patches of 48 px, +/-16 px)", fps, "frames/s", ">= 60",
+                 "thesis: offline, no speed given")]
+
+
+def _walk(stride_time_s, amplitude, texture, duration_s, seed, thigh=0.45, shank=0.45):
+    walk = FourierLegWalk(stride_time_s=stride_time_s, amplitude=amplitude, duration_s=duration_s,
+                          thigh_length_m=thigh, shank_length_m=shank)
+    t0 = time.perf_counter()
+    frames, table = render_leg_camera(walk, CAM, 0.05, duration_s - 0.1, load_texture(texture), seed=seed)
+    render_s = (time.perf_counter() - t0) / len(frames)
+    t0 = time.perf_counter()
+    flow = CorrelationOpticalFlow(patch_px=24, grid_step_px=24, max_shift_px=10, predict=True).estimate(frames, table.t_s).flow_
+    flow_fps = len(frames) / (time.perf_counter() - t0)
+    return walk, flow, render_s, flow_fps
+
+
+def _fit(est, flow):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        est.estimate(flow.t_s.to_numpy(), forward_flow(flow), flow.quality.to_numpy())
+    return est
+
+
+def _errors(est, walk):
+    true = walk.true_strides("left").length_m.iloc[0]
+    return 100 * np.abs(est.strides_.length_m.to_numpy() / true - 1), true
+
+
+def run(quick: bool = False) -> list[dict]:
+    rows = _flow_rows(quick) + _speed_rows()
+    duration = 10.0 if quick else 20.0
+    body = dict(thigh_length_m=0.45, shank_length_m=0.45 + ANKLE_HEIGHT_M, foot_length_m=0.2,
+                camera_from_knee_m=CAM.distance_from_knee_m, focal_px=CAM.focal_px)
+    # per-user calibration: one separate walk of known mean stride (another speed and seed than the test walks)
+    cal_walk, cal_flow, _, _ = _walk(1.12, 0.8, "gravel", 12.0, seed=99)
+    base = SlipOpticalFlowStride(**body)
+    calibrated = calibrate_slip_body(base, cal_flow.t_s.to_numpy(), forward_flow(cal_flow), cal_flow.quality.to_numpy(),
+                                     true_length_m=float(cal_walk.true_strides("left").length_m.iloc[0]))
+    thesis_like = SlipOpticalFlowStride(**body, swing_profile="parabola", integral_weight=0.0, duration_weight=50.0)
+    errs = {"calibrated": [], "default": [], "thesis": []}
+    fit_times, render_ms, flow_fps = [], [], []
+    textures = ("gravel",) if quick else ("gravel", "brick")
+    for tex in textures:
+        for label, (st, amp) in WALKS.items():
+            walk, flow, r_s, f_fps = _walk(st, amp, tex, duration, seed=len(errs["default"]))
+            render_ms.append(1e3 * r_s)
+            flow_fps.append(f_fps)
+            for key, est in (("calibrated", calibrated), ("default", base), ("thesis", thesis_like)):
+                fitted = _fit(SlipOpticalFlowStride(**est.get_params()), flow)
+                e, true = _errors(fitted, walk)
+                errs[key].append(np.mean(e) if len(e) else np.nan)
+                if key == "calibrated":
+                    fit_times += fitted.fits_.time_s.tolist()
+                    rows.append(_row(f"rendered walk {tex}, true {true:.2f} m", "stride length mean abs error (calibrated)",
+                                     np.mean(e) if len(e) else np.nan, "%", "<= 3", f"10% ({THESIS}, 1.08 m vs 1.20 m, one trial)"))
+    rows.append(_row(f"{len(errs['calibrated'])} rendered walks", "stride length MAE, per-user calibrated body",
+                     np.nanmean(errs["calibrated"]), "%", "<= 3", f"10% ({THESIS}, one trial)"))
+    rows.append(_row(f"{len(errs['default'])} rendered walks", "stride length MAE, default body (no calibration)",
+                     np.nanmean(errs["default"]), "%", "-", f"10% ({THESIS}, one trial)"))
+    rows.append(_row(f"{len(errs['thesis'])} rendered walks", "stride length MAE, thesis model (parabola swing, plain SSD)",
+                     np.nanmean(errs["thesis"]), "%", "-", f"10% ({THESIS}, one trial)"))
+    # the thesis set-up: its Table 1 body (thigh 0.5, shank 0.6 to the ground, foot 0.2 m), a 1.20 m stride
+    walk, flow, _, _ = _walk(1.1, 0.77, "gravel", duration, seed=7, thigh=0.5, shank=0.6 - ANKLE_HEIGHT_M)
+    table1 = dict(body, thigh_length_m=0.5, shank_length_m=0.6)
+    for key, est in (("our fit", SlipOpticalFlowStride(**table1)),
+                     ("thesis model", SlipOpticalFlowStride(**table1, swing_profile="parabola", integral_weight=0.0, duration_weight=50.0))):
+        fitted = _fit(est, flow)
+        e, true = _errors(fitted, walk)
+        rows.append(_row(f"thesis set-up (Table 1 body), true {true:.2f} m", f"stride length mean abs error, {key}",
+                         np.mean(e) if len(e) else np.nan, "%", "<= 3", f"10% ({THESIS}: 1.08 m vs 1.20 m)"))
+    rows.append(_row("two-stride window", "fit time incl. all starts (median)", np.median(fit_times), "s", "<= 0.5", "thesis: fmincon, 5 starts, no time given"))
+    rows.append(_row("160x120 at 100 fps", "render time per frame", np.mean(render_ms), "ms", "-", "-"))
+    rows.append(_row("160x120 at 100 fps", "correlation flow speed", np.mean(flow_fps), "frames/s", "-", "-"))
+    return rows
