@@ -10,6 +10,7 @@ import pandas as pd
 import pytest
 
 from pdr.calibration import AdaptiveKalmanCalibration, RecursiveStepCalibration, gnss_segments
+from pdr.calibration.segments import clean_fixes
 from pdr.cli.main import main
 from pdr.constants import GRAVITY_MPS2
 from pdr.errors import InputError
@@ -182,3 +183,19 @@ def test_cli_calibrate_needs_gnss(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.startswith("error:") and "needs GNSS" in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "m.json").exists()
+
+
+def test_unreported_gnss_jumps_are_dropped():
+    freq = np.full(600, 1.85)
+    steps, gnss, length = synthetic_walk(freq, h_acc_m=1.0, seed=8, length_scale=1.1)
+    rng = np.random.default_rng(9)
+    jumps = rng.choice(np.arange(5, len(gnss) - 5), 8, replace=False)
+    angle = rng.uniform(0, 2 * np.pi, len(jumps))
+    gnss.loc[jumps, "e_m"] += 30.0 * np.cos(angle)
+    gnss.loc[jumps, "n_m"] += 30.0 * np.sin(angle)
+    usable, _, _ = clean_fixes(gnss.t_s.to_numpy(), gnss.e_m.to_numpy(), gnss.n_m.to_numpy(), gnss.h_acc_m.to_numpy(),
+                               np.ones(len(gnss), bool), outlier_h_acc_factor=5.0, smoothing_s=2.0)
+    assert not usable[jumps].any() and usable.mean() > 0.9
+    akf = AdaptiveKalmanCalibration().fit(steps, gnss, RegressionStepLength.population())
+    est = akf.model_.estimate(steps).step_length_m_
+    assert abs(est.sum() / length.sum() - 1) < 0.02

@@ -31,6 +31,8 @@ class AdaptiveKalmanCalibration(Algorithm):
         of :func:`pdr.calibration.segments.gnss_segments` (``assumed_h_acc_m`` for fixes without ``h_acc_m``).
     min_freq_spread_hz : the segments see "several walking frequencies" when the standard deviation of their mean
         step frequencies reaches this; otherwise only A (the first parameter) is updated.
+    outlier_h_acc_factor, gnss_smoothing_s : GNSS outlier test and local line fit before the segments
+        (:func:`pdr.calibration.segments.clean_fixes`; 0 s = no smoothing).
 
     Attributes
     ----------
@@ -69,7 +71,7 @@ class AdaptiveKalmanCalibration(Algorithm):
                  process_std_min_m: float = 0.002, innovation_window: int = 3, segment_steps: float = 20.0,
                  min_segment_steps: float = 8.0, max_h_acc_m: float = 10.0, assumed_h_acc_m: float = 5.0,
                  min_straightness: float = 0.9, min_step_m: float = 0.2, max_step_m: float = 1.6,
-                 min_freq_spread_hz: float = 0.1):
+                 min_freq_spread_hz: float = 0.1, outlier_h_acc_factor: float = 5.0, gnss_smoothing_s: float = 2.0):
         self.measurement_std_m = measurement_std_m
         self.process_std_init_m = process_std_init_m
         self.process_std_min_m = process_std_min_m
@@ -82,10 +84,14 @@ class AdaptiveKalmanCalibration(Algorithm):
         self.min_step_m = min_step_m
         self.max_step_m = max_step_m
         self.min_freq_spread_hz = min_freq_spread_hz
+        self.outlier_h_acc_factor = outlier_h_acc_factor
+        self.gnss_smoothing_s = gnss_smoothing_s
 
     def _check(self) -> None:
+        if not isinstance(self.gnss_smoothing_s, (int, float)) or not self.gnss_smoothing_s >= 0:
+            raise InputError(f"AdaptiveKalmanCalibration: expected gnss_smoothing_s >= 0 (s), found {self.gnss_smoothing_s!r}")
         for name in ("measurement_std_m", "process_std_init_m", "process_std_min_m", "segment_steps", "min_segment_steps",
-                     "max_h_acc_m", "assumed_h_acc_m", "max_step_m"):
+                     "max_h_acc_m", "assumed_h_acc_m", "max_step_m", "outlier_h_acc_factor"):
             v = getattr(self, name)
             if not isinstance(v, (int, float)) or isinstance(v, bool) or not np.isfinite(v) or v <= 0:
                 raise InputError(f"AdaptiveKalmanCalibration: expected {name} a positive number, found {v!r}")
@@ -139,7 +145,8 @@ class AdaptiveKalmanCalibration(Algorithm):
     def _seg_args(self) -> dict:
         return dict(segment_steps=self.segment_steps, min_segment_steps=self.min_segment_steps, max_h_acc_m=self.max_h_acc_m,
                     assumed_h_acc_m=self.assumed_h_acc_m, min_straightness=self.min_straightness,
-                    min_step_m=self.min_step_m, max_step_m=self.max_step_m)
+                    min_step_m=self.min_step_m, max_step_m=self.max_step_m,
+                    outlier_h_acc_factor=self.outlier_h_acc_factor, smoothing_s=self.gnss_smoothing_s)
 
     @staticmethod
     def _prior_cov(model: StepLengthModel) -> np.ndarray:

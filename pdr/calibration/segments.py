@@ -5,8 +5,8 @@ A segment runs from one usable GNSS fix A to a later one B of the same walking b
 instants) times the straightness of the walked path: the mean resultant length of the steps' unit heading vectors,
 so a corner inside a segment does not shorten the measured step (1 when the steps carry no heading).
 
-Gates (the reason of a rejection is kept): only fixes with a finite position and a reported 1-sigma horizontal
-accuracy ``h_acc_m`` of at most ``max_h_acc_m`` end segments; both fixes must lie inside one bout of detected steps
+Gates (the reason of a rejection is kept): only fixes with a finite position, a reported 1-sigma horizontal
+accuracy ``h_acc_m`` of at most ``max_h_acc_m`` and in line with their neighbours (no unreported jump) end segments; both fixes must lie inside one bout of detected steps
 (walking the whole time); at least ``min_segment_steps`` steps; straightness at least ``min_straightness``; and the
 measured step inside ``[min_step_m, max_step_m]``.
 """
@@ -48,13 +48,47 @@ def check_gnss(gnss: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame({"t_s": t, "e_m": gnss["e_m"].to_numpy(float), "n_m": gnss["n_m"].to_numpy(float), "h_acc_m": h})
 
 
+def clean_fixes(t_s: np.ndarray, e_m: np.ndarray, n_m: np.ndarray, h_acc_m: np.ndarray, good: np.ndarray, *,
+                outlier_h_acc_factor: float, smoothing_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Drop outliers and smooth: returns (usable mask, east, north).
+
+    A fix farther than ``outlier_h_acc_factor * h_acc_m`` from the line through its two usable neighbours (each within
+    3 s) is an outlier (a multipath jump the receiver did not report). Each remaining fix is replaced by a local
+    straight-line fit over the usable fixes within +-``smoothing_s`` (when there are at least 3), which averages the
+    white part of the GNSS error; sparse fixes (landmarks) stay as they are.
+    """
+    usable = good.copy()
+    idx = np.flatnonzero(good)
+    if len(idx) >= 3:
+        prev, mid, nxt = idx[:-2], idx[1:-1], idx[2:]
+        close = (t_s[nxt] - t_s[prev]) <= 3.0
+        w = (t_s[mid] - t_s[prev]) / (t_s[nxt] - t_s[prev])
+        de = e_m[mid] - (e_m[prev] + w * (e_m[nxt] - e_m[prev]))
+        dn = n_m[mid] - (n_m[prev] + w * (n_m[nxt] - n_m[prev]))
+        usable[mid[close & (np.hypot(de, dn) > outlier_h_acc_factor * h_acc_m[mid])]] = False
+    e_s, n_s = e_m.copy(), n_m.copy()
+    idx = np.flatnonzero(usable)
+    if smoothing_s > 0 and len(idx) >= 3:
+        tu = t_s[idx]
+        lo = np.searchsorted(tu, tu - smoothing_s, side="left")
+        hi = np.searchsorted(tu, tu + smoothing_s, side="right")
+        for j, (a, b) in enumerate(zip(lo, hi)):
+            if b - a >= 3:
+                dt = tu[a:b] - tu[j]
+                design = np.column_stack([np.ones(b - a), dt])
+                coef, *_ = np.linalg.lstsq(design, np.column_stack([e_m[idx[a:b]], n_m[idx[a:b]]]), rcond=None)
+                e_s[idx[j]], n_s[idx[j]] = coef[0]
+    return usable, e_s, n_s
+
+
 def gnss_segments(steps: pd.DataFrame, gnss: pd.DataFrame, *, segment_steps: float, min_segment_steps: float,
                   max_h_acc_m: float, assumed_h_acc_m: float, min_straightness: float, min_step_m: float,
-                  max_step_m: float) -> pd.DataFrame:
+                  max_step_m: float, outlier_h_acc_factor: float = 5.0, smoothing_s: float = 2.0) -> pd.DataFrame:
     """One row per candidate segment (columns :data:`SEGMENT_COLUMNS`); ``used`` marks those that passed the gates.
 
     ``k_first``/``k_last`` are the indices (into ``steps``) of the first and last step contact inside the segment.
-    Fixes without ``h_acc_m`` are taken at ``assumed_h_acc_m``.
+    Fixes without ``h_acc_m`` are taken at ``assumed_h_acc_m``; outliers are dropped and fixes smoothed first
+    (:func:`clean_fixes`).
     """
     _check_steps(steps)
     gnss = check_gnss(gnss)
@@ -66,8 +100,9 @@ def gnss_segments(steps: pd.DataFrame, gnss: pd.DataFrame, *, segment_steps: flo
     heading = steps["heading_rad"].to_numpy(float) if "heading_rad" in steps.columns else np.full(len(steps), np.nan)
     h_acc = gnss["h_acc_m"].fillna(assumed_h_acc_m).to_numpy(float)
     finite = np.isfinite(gnss["e_m"].to_numpy()) & np.isfinite(gnss["n_m"].to_numpy())
-    good = finite & (h_acc <= max_h_acc_m)
     tg, eg, ng = gnss["t_s"].to_numpy(float), gnss["e_m"].to_numpy(float), gnss["n_m"].to_numpy(float)
+    good, eg, ng = clean_fixes(tg, eg, ng, h_acc, finite & (h_acc <= max_h_acc_m),
+                               outlier_h_acc_factor=outlier_h_acc_factor, smoothing_s=smoothing_s)
 
     # bout spans and the continuous step count c(t) inside each bout
     rows = []
