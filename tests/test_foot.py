@@ -14,6 +14,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from pdr.errors import InputError
 from pdr.foot import DoubleFeetCalibration, FootStepTrackerStride, ZeroVelocityDetection, ZuptInsStride
@@ -202,6 +204,24 @@ def test_zupt_ins_is_invariant_to_the_mounting():
     la = ZuptInsStride().estimate(a).strides_["length_m"].to_numpy()
     lb = ZuptInsStride().estimate(b).strides_["length_m"].to_numpy()
     assert np.allclose(la, lb, atol=0.01)
+
+
+_BASE = simulate_foot_walk(n_strides=4, turn_rad_per_stride=0.3, noise=1.0, seed=11)
+_BASE_LENGTHS = ZuptInsStride().estimate(_BASE[0]).strides_["length_m"].to_numpy()
+
+
+@settings(max_examples=6, deadline=None)
+@given(shift=st.floats(-1e4, 1e4), rv=st.tuples(*[st.floats(-3.0, 3.0)] * 3))
+def test_zupt_ins_lengths_do_not_depend_on_the_clock_origin_nor_the_sensor_orientation(shift, rv):
+    imu = _BASE[0].copy()
+    Q = rotvec_to_matrix(np.array(rv))  # the sensor turned by Q on the foot: v_new = Q^T v_old
+    for kind in ("acc", "gyr"):
+        cols = [c for c in imu.columns if c.startswith(kind)]
+        imu[cols] = imu[cols].to_numpy() @ Q
+    imu["t_s"] = imu["t_s"] + shift
+    s = ZuptInsStride().estimate(imu).strides_
+    assert np.allclose(s["length_m"].to_numpy(), _BASE_LENGTHS, atol=0.005)
+    assert s["t_start_s"].iloc[0] >= shift
 
 
 def test_zupt_ins_removes_the_gyro_bias_of_a_first_rest():
