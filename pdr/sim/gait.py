@@ -59,6 +59,7 @@ HIP_SEPARATION_RATIO = 0.095  # distance between the hip joint centres
 HEEL_BEHIND_ANKLE = 0.23  # fraction of the foot length behind the ankle
 ROCKER_RADIUS_FOOT = 1.5  # roll-over radius of the sole, in foot lengths (Hansen et al. 2004: ~0.3 leg length)
 
+GAIT_START_FRACTION = 0.5  # the pelvis moves about half a step on the first step of a bout and on the last
 RUN_SPEED_MPS = (2.0, 2.6)  # walk-to-run blend of the curves, from fully walking to fully running
 SEGMENTS = ("pelvis", "thigh_left", "shank_left", "foot_left", "thigh_right", "shank_right", "foot_right")
 JOINTS = ("pelvis", "hip", "knee", "ankle", "heel", "toe")
@@ -192,7 +193,8 @@ def plan_walk(segments: Sequence[tuple[float, float]], user: GaitUser, body: Bod
 
     A speed of 0 is a stop (standing). Consecutive moving segments form one bout; each step's duration is
     1 / f(v) and its length L(v) with per-step variability (partly shared with the duration: longer steps take a
-    little longer). A bout shorter than three steps is spent standing.
+    little longer); the first and last steps of a bout move the pelvis half as far. A bout shorter than three
+    steps is spent standing.
     """
     bouts: list[Bout] = []
     t = t0_s
@@ -222,6 +224,8 @@ def plan_walk(segments: Sequence[tuple[float, float]], user: GaitUser, body: Bod
             vs.append(v)
         if len(times) >= 4:
             n = len(times) - 1
+            lengths[0] *= GAIT_START_FRACTION  # from standing, and back to feet together
+            lengths[-1] *= GAIT_START_FRACTION
             bouts.append(Bout(np.array(times), phase + 0.5 * np.arange(n + 1), np.array(lengths), np.array(vs)))
             phase += 0.5 * n
 
@@ -540,8 +544,19 @@ class WalkKinematics:
         return {"s_m": ps, "h_m": self._pelvis_h(t, st), "heading_rad": self.route.heading_rad(ps) + off["yaw"],
                 "phase": st["phase"], "envelope": st["env"], "speed_mps": st["speed"]}
 
+    def pelvis_position_m(self, t_s) -> np.ndarray:
+        """(N, 3) world position of the pelvis centre (cheaper than :meth:`joint_positions_m`)."""
+        t = self._check_t(t_s)
+        st = self._state(t)
+        off = self._pelvis_offsets(st)
+        return self.route.to_world(self._pelvis_s(t, st), off["sway"], self._pelvis_h(t, st))
+
     def segment_rotation(self, t_s, segment: str) -> np.ndarray:
         """(N, 3, 3) rotation matrices segment frame -> world for ``pelvis``, ``thigh_*``, ``shank_*``, ``foot_*``."""
+        return self.segment_pose(t_s, segment)[1]
+
+    def segment_pose(self, t_s, segment: str) -> tuple[dict[str, np.ndarray] | None, np.ndarray]:
+        """Joint positions (None for the pelvis) and the segment's rotation, computed together."""
         if segment not in SEGMENTS:
             raise InputError(f"kinematics: expected a segment among {', '.join(SEGMENTS)}, found {segment!r}")
         t = self._check_t(t_s)
@@ -550,7 +565,7 @@ class WalkKinematics:
         off = self._pelvis_offsets(st)
         psi = self.route.heading_rad(ps)
         if segment == "pelvis":
-            return rotation_zyx(psi + off["yaw"], off["pitch"], off["roll"])
+            return None, rotation_zyx(psi + off["yaw"], off["pitch"], off["roll"])
         part, side = segment.split("_")
         j = self.joint_positions_m(t)
         left = np.stack([-np.sin(psi), np.cos(psi), np.zeros_like(psi)], -1)
@@ -559,13 +574,13 @@ class WalkKinematics:
             x /= np.linalg.norm(x, axis=-1, keepdims=True)
             y = left - np.sum(left * x, -1, keepdims=True) * x
             y /= np.linalg.norm(y, axis=-1, keepdims=True)
-            return np.stack([x, y, np.cross(x, y)], axis=-1)
+            return j, np.stack([x, y, np.cross(x, y)], axis=-1)
         top, bottom = ("hip", "knee") if part == "thigh" else ("knee", "ankle")
         z = j[f"{bottom}_{side}"] - j[f"{top}_{side}"]
         z /= np.linalg.norm(z, axis=-1, keepdims=True)
         y = -left - np.sum(-left * z, -1, keepdims=True) * z
         y /= np.linalg.norm(y, axis=-1, keepdims=True)
-        return np.stack([np.cross(y, z), y, z], axis=-1)
+        return j, np.stack([np.cross(y, z), y, z], axis=-1)
 
 
 def _rot2(angle: np.ndarray, pt: np.ndarray) -> np.ndarray:

@@ -1,0 +1,192 @@
+"""Sensor synthesis from the body kinematics: IMU (specific force, angular rate), magnetometer, barometer.
+
+Specific force is ``R^T (a_world - g_world)`` with ``a_world`` the second derivative of the sensor's world position
+(a 5-point central difference at the IMU rate, fourth-order accurate) and ``g_world = (0, 0, -9.80665)``, so a
+sensor at rest reads +9.80665 m/s² along its world-up axis. Angular rate is the body-frame rate of the rotation
+sequence, ``log(R(t-dt)^T R(t+dt)) / 2 dt``. Errors: white noise, a constant bias per axis, a gyro bias random
+walk, a magnetometer hard-iron offset and local disturbances near steel, barometer noise and a weather drift.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pandas as pd
+from scipy.spatial.transform import Rotation
+
+from pdr.constants import GRAVITY_MPS2
+from pdr.errors import InputError
+from pdr.sim.gait import WalkKinematics, rotation_zyx
+
+IMU_PLACEMENTS = ("waist", "pocket", "hand", "foot_left", "foot_right", "shank_left", "shank_right")
+G_WORLD = np.array([0.0, 0.0, -GRAVITY_MPS2])
+
+# Sensor axes expressed in the segment frame they ride on (columns: sensor x, y, z).
+_POCKET_IN_THIGH = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])  # phone upright, screen forward
+_PHONE_IN_BODY = np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # x right, y forward, z up
+
+
+@dataclasses.dataclass(frozen=True)
+class ImuSpec:
+    """One simulated IMU (a ``[[imu]]`` table of the scenario).
+
+    Parameters: ``placement`` (one of IMU_PLACEMENTS), ``rate_hz``, white noise ``acc_noise_mps2`` /
+    ``gyr_noise_radps`` (1-sigma per sample), constant bias spreads ``acc_bias_mps2`` / ``gyr_bias_radps``
+    (1-sigma of the draw), ``gyr_bias_walk_radps_per_sqrt_s`` (random walk), ``magnetometer`` and ``barometer``
+    (columns on or off), ``mag_noise_ut``, ``mag_hard_iron_ut``, ``hand_yaw_offset_deg`` (phone in hand: yaw
+    between the phone's forward axis and the walking direction), ``hand_tilt_deg`` (screen tilt towards the face).
+    """
+
+    placement: str = "waist"
+    rate_hz: float = 100.0
+    acc_noise_mps2: float = 0.04
+    gyr_noise_radps: float = 0.004
+    acc_bias_mps2: float = 0.05
+    gyr_bias_radps: float = 0.003
+    gyr_bias_walk_radps_per_sqrt_s: float = 1e-4
+    magnetometer: bool = True
+    barometer: bool = True
+    mag_noise_ut: float = 0.4
+    mag_hard_iron_ut: float = 2.0
+    baro_noise_hpa: float = 0.03
+    hand_yaw_offset_deg: float = 12.0
+    hand_tilt_deg: float = 35.0
+
+    def __post_init__(self):
+        if self.placement not in IMU_PLACEMENTS:
+            raise InputError(f"imu.placement: expected one of {', '.join(IMU_PLACEMENTS)}, found {self.placement!r}")
+        if not 10.0 <= self.rate_hz <= 2000.0:
+            raise InputError(f"imu.rate_hz: expected 10-2000 Hz, found {self.rate_hz}")
+        for f in dataclasses.fields(self):
+            v = getattr(self, f.name)
+            if f.type == "float" and (not np.isfinite(v) or v < 0) and f.name != "hand_yaw_offset_deg":
+                raise InputError(f"imu.{f.name}: expected a finite number >= 0, found {v}")
+
+
+def _smooth_random(rng: np.random.Generator, t: np.ndarray, amplitude: float, periods_s=(2.7, 5.3, 11.0, 23.0)) -> np.ndarray:
+    """A smooth zero-mean random signal: sinusoids of the given periods with random phases, RMS ~ amplitude."""
+    out = np.zeros_like(t)
+    for p in periods_s:
+        out += np.sin(2 * np.pi * t / (p * rng.uniform(0.8, 1.25)) + rng.uniform(0, 2 * np.pi))
+    return amplitude * out * np.sqrt(2.0 / len(periods_s))
+
+
+class SensorPose:
+    """Position and orientation (sensor -> world) of a sensor at a placement, at any times."""
+
+    def __init__(self, kin: WalkKinematics, spec: ImuSpec, rng: np.random.Generator):
+        self.kin, self.spec = kin, spec
+        # the phone's own slow motions in the hand (fixed at construction, so any times can be asked)
+        self._sway_seed = int(rng.integers(2**31))
+
+    def __call__(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        kin, spec = self.kin, self.spec
+        place = spec.placement
+        if place == "waist":
+            rot = kin.segment_rotation(t, "pelvis")
+            return kin.pelvis_position_m(t) + rot @ np.array([-0.10, 0.0, 0.0]), rot  # on the sacrum
+        if place == "hand":
+            rng = np.random.default_rng(self._sway_seed)
+            psi = kin.route.heading_rad(kin.pelvis_state(t)["s_m"])
+            sway = [_smooth_random(rng, t, a) for a in (0.02, 0.015, 0.015)]
+            d_yaw, d_tilt, d_roll = (np.radians(_smooth_random(rng, t, a)) for a in (3.0, 3.0, 2.0))
+            zero = np.zeros_like(t)
+            local = np.stack([0.38 + sway[0], -0.12 + sway[1], 0.30 + sway[2]], -1)  # before the chest, right hand
+            pos = kin.pelvis_position_m(t) + np.einsum("nij,nj->ni", rotation_zyx(psi, zero, zero), local)
+            yaw = rotation_zyx(psi + np.radians(spec.hand_yaw_offset_deg) + d_yaw, zero, zero)
+            tilt = Rotation.from_rotvec(np.stack([np.radians(spec.hand_tilt_deg) + d_tilt, zero, d_roll], -1)).as_matrix()
+            return pos, yaw @ _PHONE_IN_BODY @ tilt
+        if place == "pocket":
+            j, rot = kin.segment_pose(t, "thigh_left")
+            pos = j["hip_left"] + np.einsum("nij,j->ni", rot, np.array([0.07, 0.0, 0.3 * kin.body.thigh_m]))
+            return pos, rot @ _POCKET_IN_THIGH
+        part, side = place.split("_")
+        j, rot = kin.segment_pose(t, place)
+        if part == "foot":
+            return j[f"ankle_{side}"] + np.einsum("nij,j->ni", rot, np.array([0.05, 0.0, 0.01])), rot  # on the instep
+        return j[f"knee_{side}"] + np.einsum("nij,j->ni", rot, np.array([0.04, 0.0, 0.5 * kin.body.shank_m])), rot
+
+
+def true_motion(pose: SensorPose, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Noise-free specific force (N, 3), body angular rate (N, 3), positions and rotations at times t
+    (uniformly spaced)."""
+    dt = float(t[1] - t[0])
+    te = np.concatenate([t[0] - dt * np.arange(2, 0, -1), t, t[-1] + dt * np.arange(1, 3)])
+    pos, rot = pose(te)
+    acc = (-pos[4:] + 16 * pos[3:-1] - 30 * pos[2:-2] + 16 * pos[1:-3] - pos[:-4]) / (12 * dt * dt)
+    r_mid = rot[2:-2]
+    f = np.einsum("nji,nj->ni", r_mid, acc - G_WORLD)
+    rel = np.einsum("nji,njk->nik", rot[1:-3], rot[3:-1])  # R(t-dt)^T R(t+dt)
+    gyr = Rotation.from_matrix(rel).as_rotvec() / (2 * dt)
+    return f, gyr, pos[2:-2], r_mid
+
+
+@dataclasses.dataclass(frozen=True)
+class MagneticField:
+    """Earth field (``field_ut``, ``inclination_deg`` (+ = pointing down), ``declination_deg``) plus steel
+    disturbances: point dipoles of strength ``steel_ut`` (µT at 1 m) at ``sources_enu`` (N, 3) with unit moments."""
+
+    field_ut: float = 48.0
+    inclination_deg: float = 64.0
+    declination_deg: float = 2.0
+    steel_ut: float = 25.0
+    sources_enu: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0, 3)))
+    moments: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0, 3)))
+
+    def earth_enu(self) -> np.ndarray:
+        inc, dec = np.radians(self.inclination_deg), np.radians(self.declination_deg)
+        return self.field_ut * np.array([np.cos(inc) * np.sin(dec), np.cos(inc) * np.cos(dec), -np.sin(inc)])
+
+    def at(self, pos: np.ndarray) -> np.ndarray:
+        """World field (µT) at positions (N, 3)."""
+        b = np.broadcast_to(self.earth_enu(), pos.shape).copy()
+        for src, m in zip(self.sources_enu, self.moments):
+            r = pos - src
+            d = np.maximum(np.linalg.norm(r, axis=1), 0.3)
+            rh = r / d[:, None]
+            b += self.steel_ut * (3 * (rh @ m)[:, None] * rh - m) / d[:, None] ** 3
+        return b
+
+
+def place_steel(positions_enu: np.ndarray, spacing_m: float, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """Steel sources beside a path (every ``spacing_m`` of it, 0.5-2 m to a random side, 0-2.5 m high)."""
+    if len(positions_enu) < 2 or spacing_m <= 0:
+        return np.zeros((0, 3)), np.zeros((0, 3))
+    d = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(positions_enu[:, :2], axis=0), axis=1))])
+    marks = np.arange(0.5 * spacing_m, d[-1], spacing_m)
+    idx = np.searchsorted(d, marks)
+    base = positions_enu[idx]
+    ang = rng.uniform(0, 2 * np.pi, len(idx))
+    dist = rng.uniform(0.5, 2.0, len(idx))
+    src = np.column_stack([base[:, 0] + dist * np.cos(ang), base[:, 1] + dist * np.sin(ang), rng.uniform(0.0, 2.5, len(idx))])
+    m = rng.standard_normal((len(idx), 3))
+    m /= np.linalg.norm(m, axis=1, keepdims=True)
+    return src, m
+
+
+def pressure_hpa(alt_m: np.ndarray) -> np.ndarray:
+    """International standard atmosphere (ICAO), sea-level 1013.25 hPa."""
+    return 1013.25 * (1.0 - 2.25577e-5 * alt_m) ** 5.25588
+
+
+def synthesize_imu(kin: WalkKinematics, spec: ImuSpec, t: np.ndarray, rng: np.random.Generator, *,
+                   mag: MagneticField, origin_alt_m: float = 0.0, baro_drift_hpa_per_h: float = 0.3) -> pd.DataFrame:
+    """An ``imu.csv`` table of one placement at times t (uniform grid), with all sensor errors."""
+    pose = SensorPose(kin, spec, rng)
+    f, w, pos, rot = true_motion(pose, t)
+    n = len(t)
+    dt = float(t[1] - t[0])
+    acc = f + spec.acc_bias_mps2 * rng.standard_normal(3) + spec.acc_noise_mps2 * rng.standard_normal((n, 3))
+    walk = np.cumsum(spec.gyr_bias_walk_radps_per_sqrt_s * np.sqrt(dt) * rng.standard_normal((n, 3)), axis=0)
+    gyr = w + spec.gyr_bias_radps * rng.standard_normal(3) + walk + spec.gyr_noise_radps * rng.standard_normal((n, 3))
+    out = {"t_s": t, "acc_x_mps2": acc[:, 0], "acc_y_mps2": acc[:, 1], "acc_z_mps2": acc[:, 2],
+           "gyr_x_radps": gyr[:, 0], "gyr_y_radps": gyr[:, 1], "gyr_z_radps": gyr[:, 2]}
+    if spec.magnetometer:
+        b = np.einsum("nji,nj->ni", rot, mag.at(pos))
+        b += spec.mag_hard_iron_ut * rng.standard_normal(3) + spec.mag_noise_ut * rng.standard_normal((n, 3))
+        out.update({"mag_x_ut": b[:, 0], "mag_y_ut": b[:, 1], "mag_z_ut": b[:, 2]})
+    if spec.barometer:
+        drift = rng.normal(0.0, baro_drift_hpa_per_h) * (t - t[0]) / 3600.0
+        out["baro_hpa"] = pressure_hpa(origin_alt_m + pos[:, 2]) + drift + spec.baro_noise_hpa * rng.standard_normal(n)
+    return pd.DataFrame(out)

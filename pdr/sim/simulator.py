@@ -1,0 +1,346 @@
+"""``pdr simulate``: a scenario file -> a canonical recording with its ``reference/`` truth.
+
+Scenario keys (TOML; every table but ``[[segment]]`` and ``[route]`` is optional; unknown keys are errors):
+
+``[simulation]`` ``id`` (recording id; default the file name), ``description``.
+``[subject]`` ``height_m`` (default: drawn, 1.60-1.90 m), ``mass_kg``.
+``[geo]`` ``origin_lat_deg``, ``origin_lon_deg`` (default 46.5191, 6.5668), ``origin_alt_m`` (default 400).
+``[route]`` ``waypoints_m`` ([[east, north], ...], the polyline walked), ``loop`` (repeat it, closed, as long as
+    needed; default true), ``grades`` (slope per leg, rise/run; default flat), ``turn_smoothing_m`` (default 0.8).
+``[[segment]]`` in order: ``duration_s``, ``speed_mps`` (0 = standing; > 2.2 runs), ``indoor`` (default false:
+    no GNSS, magnetic disturbances near steel).
+``[[imu]]`` one table per IMU; the first is ``imu.csv``, the others ``imu_<placement>.csv``: ``placement``
+    (waist, pocket, hand, foot_left, foot_right, shank_left, shank_right), ``rate_hz`` and the error parameters
+    of :class:`pdr.sim.sensors.ImuSpec`. Default: one waist IMU at 100 Hz.
+``[gnss]`` the parameters of :class:`pdr.sim.gnss.GnssSpec` (``enabled``, ``noise_m``, ``markov_sigma_m``,
+    ``markov_tau_s``, ``outlier_fraction``, ``outlier_m``, ``outages_s`` = [[start, end], ...], ...).
+``[magnetic]`` ``field_ut``, ``inclination_deg``, ``declination_deg``, ``steel_ut`` (dipole strength, µT at 1 m),
+    ``steel_spacing_m`` (one steel source per this many metres of indoor path; 0 = none).
+``[barometer]`` ``drift_hpa_per_h`` (1-sigma of the weather drift rate).
+``[gait]`` ``cv_slow``, ``cv_fast`` (per-step step-length variability at 0.6 and 1.7 m/s).
+``[camera]`` a leg camera rendered by :mod:`pdr.sim.camera`: ``fps, focal_px, cx_px, cy_px, width_px, height_px,
+    segment, distance_from_knee_m, texture`` (``gravel``/``brick``/a path), optional ``t_start_s, t_end_s``.
+
+Randomness: ``numpy.random.default_rng([seed, k])`` with a fixed ``k`` per component (person, steps, each IMU,
+GNSS, steel), so a seed gives byte-identical files.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from pdr.errors import InputError
+from pdr.geo import en_to_latlon
+from pdr.io.recording import Recording, save_recording
+from pdr.io.tomlio import read_toml
+from pdr.sim.gait import Body, GaitUser, WalkKinematics, plan_walk
+from pdr.sim.gnss import GnssSpec, simulate_gnss
+from pdr.sim.route import Route
+from pdr.sim.sensors import ImuSpec, MagneticField, place_steel, synthesize_imu
+
+SECTIONS = ("simulation", "subject", "geo", "route", "segment", "imu", "gnss", "magnetic", "barometer", "gait", "camera")
+KEYS = {
+    "simulation": {"id": str, "description": str},
+    "subject": {"height_m": float, "mass_kg": float},
+    "geo": {"origin_lat_deg": float, "origin_lon_deg": float, "origin_alt_m": float},
+    "route": {"waypoints_m": list, "loop": bool, "grades": list, "turn_smoothing_m": float},
+    "segment": {"duration_s": float, "speed_mps": float, "indoor": bool, "label": str},
+    "magnetic": {"field_ut": float, "inclination_deg": float, "declination_deg": float, "steel_ut": float,
+                 "steel_spacing_m": float},
+    "barometer": {"drift_hpa_per_h": float},
+    "gait": {"cv_slow": float, "cv_fast": float},
+}
+TRAJECTORY_RATE_HZ = 10.0
+DEFAULT_ORIGIN = (46.5191, 6.5668, 400.0)
+# fixed sub-stream keys of the seed
+_RNG_PERSON, _RNG_STEPS, _RNG_GNSS, _RNG_STEEL, _RNG_BARO, _RNG_CAMERA, _RNG_IMU = 1, 2, 3, 4, 5, 6, 10
+
+
+def _typed(section: str, table: dict, spec: dict[str, type]) -> dict:
+    if not isinstance(table, dict):
+        raise InputError(f"scenario [{section}]: expected a table, found {type(table).__name__}")
+    for key, value in table.items():
+        if key not in spec:
+            raise InputError(f"scenario [{section}]: unknown key {key!r}; expected some of: {', '.join(spec)}")
+        want = spec[key]
+        ok = isinstance(value, (int, float)) and not isinstance(value, bool) if want is float else isinstance(value, want)
+        if not ok:
+            raise InputError(f"scenario [{section}] {key}: expected a {want.__name__}, found {value!r}")
+    return table
+
+
+def _dataclass_from(cls, section: str, table: dict):
+    names = {f.name: f for f in dataclasses.fields(cls)}
+    if not isinstance(table, dict):
+        raise InputError(f"scenario [{section}]: expected a table, found {type(table).__name__}")
+    unknown = sorted(set(table) - set(names))
+    if unknown:
+        raise InputError(f"scenario [{section}]: unknown key(s) {', '.join(unknown)}; expected some of: {', '.join(names)}")
+    kwargs = {}
+    for key, value in table.items():
+        default = names[key].default
+        if isinstance(default, bool):
+            if not isinstance(value, bool):
+                raise InputError(f"scenario [{section}] {key}: expected true or false, found {value!r}")
+        elif isinstance(default, (int, float)):
+            if isinstance(value, bool) or not isinstance(value, (int, float)):
+                raise InputError(f"scenario [{section}] {key}: expected a number, found {value!r}")
+            value = float(value)
+        elif isinstance(default, tuple):
+            if not isinstance(value, list) or not all(isinstance(v, list) and all(isinstance(x, (int, float)) for x in v) for v in value):
+                raise InputError(f"scenario [{section}] {key}: expected a list of [start, end] pairs, found {value!r}")
+            value = tuple(tuple(float(x) for x in v) for v in value)
+        elif isinstance(default, str) and not isinstance(value, str):
+            raise InputError(f"scenario [{section}] {key}: expected a string, found {value!r}")
+        kwargs[key] = value
+    return cls(**kwargs)
+
+
+@dataclasses.dataclass
+class Scenario:
+    """A validated scenario (see the module docstring for the keys)."""
+
+    id: str
+    segments: list[dict[str, Any]]
+    route: dict[str, Any]
+    imus: list[ImuSpec]
+    gnss: GnssSpec
+    subject: dict[str, Any]
+    geo: tuple[float, float, float]
+    magnetic: dict[str, Any]
+    barometer: dict[str, Any]
+    gait: dict[str, Any]
+    camera: dict[str, Any] | None
+    description: str = ""
+
+    @property
+    def duration_s(self) -> float:
+        return float(sum(s["duration_s"] for s in self.segments))
+
+
+def parse_scenario(raw: dict[str, Any], default_id: str = "sim") -> Scenario:
+    """Check a parsed scenario file and fill the defaults; every problem is an InputError naming the key."""
+    if not isinstance(raw, dict):
+        raise InputError("scenario: expected TOML tables, found something else")
+    unknown = sorted(set(raw) - set(SECTIONS))
+    if unknown:
+        raise InputError(f"scenario: unknown table(s) {', '.join(unknown)}; expected some of: {', '.join(SECTIONS)}")
+    sim = _typed("simulation", raw.get("simulation", {}), KEYS["simulation"])
+    segments = raw.get("segment")
+    if not isinstance(segments, list) or not segments:
+        raise InputError("scenario: expected at least one [[segment]] table (duration_s, speed_mps), found none")
+    for i, seg in enumerate(segments):
+        _typed(f"segment {i + 1}", seg, KEYS["segment"])
+        if "duration_s" not in seg or "speed_mps" not in seg:
+            raise InputError(f"scenario [[segment]] {i + 1}: expected duration_s and speed_mps, found {', '.join(seg) or 'nothing'}")
+        if not 0 < seg["duration_s"] <= 86400 or not 0 <= seg["speed_mps"] <= 6.0:
+            raise InputError(f"scenario [[segment]] {i + 1}: expected 0 < duration_s <= 86400 and 0 <= speed_mps <= 6, "
+                             f"found {seg['duration_s']} s at {seg['speed_mps']} m/s")
+    route = _typed("route", raw.get("route", {}), KEYS["route"])
+    if "waypoints_m" not in route:
+        raise InputError("scenario [route]: expected waypoints_m = [[east, north], ...], found none")
+    imu_tables = raw.get("imu", [{}])
+    if isinstance(imu_tables, dict):
+        imu_tables = [imu_tables]
+    imus = [_dataclass_from(ImuSpec, "imu", t) for t in imu_tables]
+    places = [s.placement for s in imus]
+    if len(set(places)) != len(places):
+        raise InputError(f"scenario [[imu]]: expected each placement once, found {', '.join(places)}")
+    gnss = _dataclass_from(GnssSpec, "gnss", raw.get("gnss", {}))
+    subject = _typed("subject", raw.get("subject", {}), KEYS["subject"])
+    geo = _typed("geo", raw.get("geo", {}), KEYS["geo"])
+    origin = (float(geo.get("origin_lat_deg", DEFAULT_ORIGIN[0])), float(geo.get("origin_lon_deg", DEFAULT_ORIGIN[1])),
+              float(geo.get("origin_alt_m", DEFAULT_ORIGIN[2])))
+    if abs(origin[0]) > 85 or abs(origin[1]) > 180:
+        raise InputError(f"scenario [geo]: expected a latitude within +-85 and a longitude within +-180, found {origin[:2]}")
+    camera = raw.get("camera")
+    if camera is not None and not isinstance(camera, dict):
+        raise InputError("scenario [camera]: expected a table")
+    return Scenario(id=str(sim.get("id", default_id)), description=str(sim.get("description", "")), segments=segments,
+                    route=route, imus=imus, gnss=gnss, subject=subject, geo=origin,
+                    magnetic=_typed("magnetic", raw.get("magnetic", {}), KEYS["magnetic"]),
+                    barometer=_typed("barometer", raw.get("barometer", {}), KEYS["barometer"]),
+                    gait=_typed("gait", raw.get("gait", {}), KEYS["gait"]), camera=camera)
+
+
+def _intervals(segments: list[dict], flag: str) -> list[tuple[float, float]]:
+    out, t = [], 0.0
+    for seg in segments:
+        if seg.get(flag, False):
+            out.append((t, t + seg["duration_s"]))
+        t += seg["duration_s"]
+    return out
+
+
+def _inside(t: np.ndarray, intervals) -> np.ndarray:
+    m = np.zeros(len(t), bool)
+    for a, b in intervals:
+        m |= (t >= a) & (t < b)
+    return m
+
+
+def build_walk(sc: Scenario, seed: int) -> WalkKinematics:
+    """The person, the route and the walk of a scenario (the body kinematics every sensor is made from)."""
+    rng_person = np.random.default_rng([seed, _RNG_PERSON])
+    height = float(sc.subject.get("height_m", np.clip(rng_person.normal(1.74, 0.08), 1.6, 1.9)))
+    body = Body(height)
+    user = GaitUser.draw(rng_person, cv_slow=float(sc.gait.get("cv_slow", 0.15)), cv_fast=float(sc.gait.get("cv_fast", 0.04)))
+    bouts = plan_walk([(float(s["duration_s"]), float(s["speed_mps"])) for s in sc.segments], user, body,
+                      np.random.default_rng([seed, _RNG_STEPS]))
+    if not bouts:
+        raise InputError("scenario: expected walking segments long enough for 3 steps, found only standing")
+    need = float(sum(b.target_length_m.sum() for b in bouts)) + 10.0
+    route = Route(sc.route["waypoints_m"], grades=sc.route.get("grades"), loop=bool(sc.route.get("loop", True)),
+                  turn_smoothing_m=float(sc.route.get("turn_smoothing_m", 0.8)), min_length_m=need)
+    return WalkKinematics(body, user, bouts, route)
+
+
+def _reference(kin: WalkKinematics, sc: Scenario, gnss_truth: pd.DataFrame | None) -> dict[str, Any]:
+    hs = kin.heel_strikes
+    t_hs = hs["t_s"].to_numpy()
+    pelvis_hs = kin.pelvis_position_m(t_hs)
+    starts = np.array([b.t_s[0] for b in kin.bouts])
+    bout = hs["bout"].to_numpy()
+    prev = np.empty_like(pelvis_hs)
+    prev[1:] = pelvis_hs[:-1]
+    first = np.r_[True, bout[1:] != bout[:-1]]
+    prev[first] = kin.pelvis_position_m(starts[bout[first]])
+    step_len = np.hypot(*(pelvis_hs[:, :2] - prev[:, :2]).T)
+    t_prev = np.where(first, starts[bout], np.r_[t_hs[0], t_hs[:-1]])
+    steps = pd.DataFrame({"t_s": t_hs, "foot": hs["foot"], "step_length_m": step_len, "step_duration_s": t_hs - t_prev,
+                          "bout_id": bout})
+    rows = []
+    for foot in ("left", "right"):
+        sel = hs[hs["foot"] == foot]
+        heel = kin.joint_positions_m(sel["t_s"].to_numpy())[f"heel_{foot}"]
+        tt, bb = sel["t_s"].to_numpy(), sel["bout"].to_numpy()
+        for k in range(len(sel) - 1):
+            if bb[k] == bb[k + 1]:
+                rows.append((tt[k], tt[k + 1], foot, float(np.hypot(*(heel[k + 1, :2] - heel[k, :2])))))
+    strides = pd.DataFrame(rows, columns=["t_start_s", "t_end_s", "foot", "length_m"]).sort_values(["t_start_s", "foot"])
+    t_traj = np.arange(int(np.floor(sc.duration_s * TRAJECTORY_RATE_HZ)) + 1) / TRAJECTORY_RATE_HZ
+    ps = kin.pelvis_state(t_traj)
+    pos = kin.pelvis_position_m(t_traj)
+    traj = pd.DataFrame({"t_s": t_traj, "e_m": pos[:, 0], "n_m": pos[:, 1], "u_m": pos[:, 2],
+                         "heading_rad": kin.route.heading_rad(ps["s_m"])})
+    fine = np.arange(0.0, sc.duration_s, 0.02)
+    pf = kin.pelvis_position_m(fine)
+    seg_d = np.hypot(*np.diff(pf[:, :2], axis=0).T)
+    bounds = np.cumsum([0.0] + [s["duration_s"] for s in sc.segments])
+    seg_speed = [float(seg_d[(fine[:-1] >= a) & (fine[:-1] < b)].sum() / (b - a)) for a, b in zip(bounds[:-1], bounds[1:])]
+    indoor = _inside(fine[:-1], _intervals(sc.segments, "indoor"))
+    summary = {
+        "distance_m": float(step_len.sum()),
+        "path_length_m": float(seg_d.sum()),
+        "n_steps": int(len(steps)),
+        "n_strides": int(len(strides)),
+        "duration_s": float(sc.duration_s),
+        "walking_time_s": float(sum(b.t_s[-1] - b.t_s[0] for b in kin.bouts)),
+        "mean_step_length_m": float(step_len.mean()),
+        "segment_speed_mps": [round(v, 4) for v in seg_speed],
+        "segment_target_speed_mps": [float(s["speed_mps"]) for s in sc.segments],
+        "indoor_distance_m": float(seg_d[indoor].sum()),
+        "height_m": float(kin.body.height_m),
+        "step_length_coef": float(kin.user.length_coef),
+        "step_length_exponent": float(kin.user.length_exponent),
+        "distance_definition": "sum of step_length_m: horizontal pelvis distance between consecutive foot contacts",
+    }
+    if gnss_truth is not None:
+        summary["gnss_fixes"] = int(len(gnss_truth))
+        summary["gnss_outliers"] = int(gnss_truth["outlier"].sum())
+        ok = gnss_truth["outlier"] == 0
+        summary["gnss_error_rms_m"] = float(np.sqrt(np.mean(gnss_truth.loc[ok, "error_m"] ** 2))) if ok.any() else float("nan")
+    return {"steps": steps, "strides": strides.reset_index(drop=True), "trajectory": traj, "summary": summary}
+
+
+def _render_camera(kin: WalkKinematics, cfg: dict[str, Any], seed: int, workdir: Path, duration_s: float):
+    """The leg-camera hook: renders ``video.avi`` + ``frames.csv`` through :mod:`pdr.sim.camera`."""
+    from pdr.sim import camera as cam
+
+    cfg = dict(cfg)
+    texture = cfg.pop("texture", "gravel")
+    t0 = float(cfg.pop("t_start_s", 0.0))
+    t1 = float(cfg.pop("t_end_s", min(duration_s, kin.duration_s)))
+    mount = {k: cfg.pop(k) for k in cam.MOUNT_KEYS if k in cfg}
+    cam_keys = {k: cfg.pop(k) for k in cam.CAMERA_KEYS if k in cfg}
+    model = cam.CameraModel.from_toml({"camera": cam_keys, "mount": mount}, what="scenario [camera]")
+    frames, frames_df = cam.render_leg_camera(kin, model, t0, t1, cam.load_texture(texture),
+                                              seed=int(np.random.default_rng([seed, _RNG_CAMERA]).integers(2**31)), **cfg)
+    video = workdir / "video.avi"
+    cam.write_video(video, frames, model.fps)
+    return model.to_toml(), video, frames_df
+
+
+def simulate(scenario: dict[str, Any], seed: int, *, workdir: Path | None = None, default_id: str = "sim") -> Recording:
+    """Simulate a recording (in memory) from a parsed scenario; deterministic for a seed.
+
+    ``workdir`` holds the rendered video when the scenario has a ``[camera]`` (a new temporary folder if None).
+
+    Example
+    -------
+    >>> rec = simulate({"route": {"waypoints_m": [[0, 0], [50, 0]]},
+    ...                 "segment": [{"duration_s": 3, "speed_mps": 0}, {"duration_s": 10, "speed_mps": 1.3}]}, seed=1)
+    >>> rec.placement, rec.reference["summary"]["n_steps"] > 10
+    ('waist', True)
+    """
+    sc = parse_scenario(scenario, default_id)
+    kin = build_walk(sc, seed)
+    origin = sc.geo
+    duration = sc.duration_s
+    indoor = _intervals(sc.segments, "indoor")
+    # magnetic field with steel along the indoor parts of the walk
+    mcfg = sc.magnetic
+    mag = MagneticField(field_ut=float(mcfg.get("field_ut", 48.0)), inclination_deg=float(mcfg.get("inclination_deg", 64.0)),
+                        declination_deg=float(mcfg.get("declination_deg", 2.0)), steel_ut=float(mcfg.get("steel_ut", 25.0)))
+    if indoor:
+        t_in = np.concatenate([np.arange(a, b, 0.5) for a, b in indoor])
+        src, mom = place_steel(kin.pelvis_position_m(t_in), float(mcfg.get("steel_spacing_m", 6.0)),
+                               np.random.default_rng([seed, _RNG_STEEL]))
+        mag = dataclasses.replace(mag, sources_enu=src, moments=mom)
+    imus = {}
+    for i, spec in enumerate(sc.imus):
+        n = int(np.floor(duration * spec.rate_hz)) + 1
+        t = np.arange(n) / spec.rate_hz
+        imus[spec.placement] = synthesize_imu(kin, spec, t, np.random.default_rng([seed, _RNG_IMU + i]), mag=mag,
+                                              origin_alt_m=origin[2],
+                                              baro_drift_hpa_per_h=float(sc.barometer.get("drift_hpa_per_h", 0.3)))
+    gnss = gnss_truth = None
+    if sc.gnss.enabled:
+        t_g = np.arange(int(np.floor(duration * sc.gnss.rate_hz)) + 1) / sc.gnss.rate_hz
+        avail = ~_inside(t_g, indoor + [tuple(iv) for iv in sc.gnss.outages_s])
+        truth = kin.pelvis_position_m(t_g)
+        fixes, gnss_truth = simulate_gnss(sc.gnss, t_g, truth, avail, np.random.default_rng([seed, _RNG_GNSS]))
+        lat, lon = en_to_latlon(fixes["e_m"].to_numpy(), fixes["n_m"].to_numpy(), origin[:2])
+        gnss = pd.DataFrame({"t_s": fixes["t_s"], "lat_deg": lat, "lon_deg": lon, "alt_m": origin[2] + fixes["u_m"],
+                             "h_acc_m": fixes["h_acc_m"]})
+    reference = _reference(kin, sc, gnss_truth)
+    if gnss_truth is not None:
+        reference["gnss_truth"] = gnss_truth
+    main = sc.imus[0].placement
+    subject = kin.body.subject(sc.subject.get("mass_kg"))
+    if main == "waist":
+        subject["sensor_height_m"] = round(kin.body.leg_length_m, 4)
+    meta = {"recording": {"id": sc.id, "placement": main, "source": "pdr simulate", "seed": int(seed)},
+            "subject": subject,
+            "geo": {"origin_lat_deg": origin[0], "origin_lon_deg": origin[1]}}
+    rec = Recording(meta=meta, imu=imus[main], extra_imus={k: v for k, v in imus.items() if k != main}, gnss=gnss,
+                    reference=reference)
+    if sc.camera is not None:
+        workdir = Path(tempfile.mkdtemp(prefix="pdr-sim-")) if workdir is None else workdir
+        rec.camera, rec.video_path, rec.frames = _render_camera(kin, sc.camera, seed, workdir, duration)
+    return rec
+
+
+def simulate_to_disk(config: Path, out: Path, seed: int = 0, force: bool = False) -> Path:
+    """Read a scenario file, simulate, write the recording atomically; return its path."""
+    config = Path(config)
+    raw = read_toml(config, what="scenario")
+    with tempfile.TemporaryDirectory(prefix="pdr-sim-") as tmp:
+        rec = simulate(raw, seed, workdir=Path(tmp), default_id=config.stem)
+        return save_recording(rec, out, force=force)
