@@ -16,7 +16,8 @@ MIN_SAMPLES = 20
 def foot_imu_arrays(imu: pd.DataFrame, what: str = "foot IMU") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(t_s, acc_mps2 (N,3), gyr_radps (N,3))`` of a canonical IMU table; InputError when it cannot be a foot IMU."""
     if not isinstance(imu, pd.DataFrame):
-        raise InputError(f"{what}: expected a pandas DataFrame with t_s, acc_*_mps2, gyr_*_radps, found {type(imu).__name__}")
+        raise InputError(f"{what}: expected a pandas DataFrame with t_s, acc_*_mps2, gyr_*_radps, "
+                         f"found {type(imu).__name__}")
     missing = [c for c in ("t_s", *ACC_COLUMNS, *GYR_COLUMNS) if c not in imu.columns]
     if missing:
         raise InputError(f"{what}: expected columns t_s, acc_*_mps2 and gyr_*_radps (a foot IMU needs the gyroscope), "
@@ -52,7 +53,8 @@ def saturated_samples(values: np.ndarray, *, min_run: int = 3, min_abs: float = 
     return mask
 
 
-def check_pair(left: pd.DataFrame, right: pd.DataFrame, *, max_offset_s: float = 0.5, max_length_ratio: float = 1.2) -> None:
+def check_pair(left: pd.DataFrame, right: pd.DataFrame, *, max_offset_s: float = 0.5,
+               max_length_ratio: float = 1.2) -> None:
     """Left and right foot IMUs must share one clock (CONTRACT.md): InputError when they clearly do not."""
     tl, tr = left["t_s"].to_numpy(dtype=float), right["t_s"].to_numpy(dtype=float)
     if len(tl) < 2 or len(tr) < 2:

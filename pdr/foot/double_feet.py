@@ -88,7 +88,8 @@ class DoubleFeetCalibration(Algorithm):
                 w = ov / dur_b
                 other[i] = float(np.sum(w * own[b_idx]))
                 other_std[i] = float(np.sqrt(np.sum((w * own_std[b_idx]) ** 2) + self.asymmetry_std_m**2))
-        ok = np.isfinite(other) & (np.abs(own - other) <= self.gate_sigma * np.sqrt(own_std**2 + np.nan_to_num(other_std) ** 2))
+        gate = self.gate_sigma * np.sqrt(own_std**2 + np.nan_to_num(other_std) ** 2)
+        ok = np.isfinite(other) & (np.abs(own - other) <= gate)
         wa = 1.0 / own_std**2
         wb = np.where(ok, 1.0 / np.where(ok, other_std, 1.0) ** 2, 0.0)
         out["length_own_m"] = own

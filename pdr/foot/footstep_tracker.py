@@ -16,7 +16,8 @@ from pdr.foot._rotations import align_to_gravity, cumulative_rotations
 from pdr.foot.frame import estimate_foot_frame
 from pdr.foot.zero_velocity import ZeroVelocityDetection
 
-CRITICAL_COLUMNS = ["t_uplift_s", "t_liftoff_s", "t_landing_s", "t_rest_s", "i_uplift", "i_liftoff", "i_landing", "i_rest"]
+CRITICAL_COLUMNS = ["t_uplift_s", "t_liftoff_s", "t_landing_s", "t_rest_s",
+                    "i_uplift", "i_liftoff", "i_landing", "i_rest"]
 STRIDE_COLUMNS = ["t_start_s", "t_end_s", "foot", "length_m", "length_std_m", "source", "forward_m", "lateral_m",
                   "height_change_m", "toe_angle_rad", "max_pitch_rad", "t_liftoff_s", "t_landing_s", "t_swing_start_s",
                   "t_swing_end_s"]

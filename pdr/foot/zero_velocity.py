@@ -125,6 +125,6 @@ class ZeroVelocityDetection(Algorithm):
         })
         motion = float(np.mean(~mask))
         if len(starts) < 2 and motion > 0.5:
-            warnings.warn(f"foot IMU: only {len(starts)} stance phase(s) while the foot moves {motion:.0%} of the time: "
-                          "the foot hardly ever rests (running?); strides need two stances", stacklevel=2)
+            warnings.warn(f"foot IMU: only {len(starts)} stance phase(s) while the foot moves {motion:.0%} of the "
+                          "time: the foot hardly ever rests (running?); strides need two stances", stacklevel=2)
         return self

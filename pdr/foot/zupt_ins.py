@@ -165,7 +165,8 @@ class ZuptInsStride(Algorithm):
         P = np.diag([1e-8] * 3 + [self.zupt_std_mps**2] * 3 + [self.initial_tilt_std_rad**2] * 2 + [1e-10])
         Rz = self.zupt_std_mps**2 * np.eye(3)
         na2, ng2 = self.acc_noise_mps2_rthz**2, self.gyr_noise_radps_rthz**2
-        ep_p, ep_v, ep_M, ep_P = np.zeros((n_ep, 3)), np.zeros((n_ep, 3)), np.zeros((n_ep, 3, 3)), np.zeros((n_ep, 9, 9))
+        ep_p, ep_v = np.zeros((n_ep, 3)), np.zeros((n_ep, 3))
+        ep_M, ep_P = np.zeros((n_ep, 3, 3)), np.zeros((n_ep, 9, 9))
         ep_p[0], ep_v[0], ep_M[0], ep_P[0] = p, v, M, P
         # everything that does not depend on the corrections, for all update intervals at once
         jj, kk = epochs[:-1], epochs[1:]

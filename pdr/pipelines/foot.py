@@ -81,7 +81,8 @@ def foot_strides(rec: Recording, config: dict) -> pd.DataFrame | None:
         if saturated.any() and len(strides):
             t = imu["t_s"].to_numpy()
             t_sat = t[saturated]
-            hit = np.array([((t_sat >= a) & (t_sat <= b)).any() for a, b in zip(strides["t_start_s"], strides["t_end_s"])])
+            hit = np.array([((t_sat >= a) & (t_sat <= b)).any()
+                            for a, b in zip(strides["t_start_s"], strides["t_end_s"])])
             strides = strides[~hit]
         extra = strides["heading_change_rad"] if "heading_change_rad" in strides else np.nan
         tables.append(strides[[*STRIDE_COLUMNS, "t_swing_start_s", "t_swing_end_s"]]
