@@ -305,6 +305,11 @@ def test_foot_strides_refuses_feet_on_different_clocks():
     half = rec.extra_imus["foot_right"].iloc[: len(rec.imu) // 2]
     with pytest.raises(InputError, match="same span"):
         foot_strides(Recording(meta=rec.meta, imu=rec.imu, extra_imus={"foot_right": half}), {})
+    right = rec.extra_imus["foot_right"]
+    shorter = right[right["t_s"] < right["t_s"].iloc[-1] - 0.8]
+    with pytest.warns(UserWarning, match="apart"):
+        out = foot_strides(Recording(meta=rec.meta, imu=rec.imu, extra_imus={"foot_right": shorter}), {})
+    assert set(out["foot"]) == {"left", "right"}
 
 
 def test_saturated_gyro_warns_and_drops_the_strides():
