@@ -395,6 +395,12 @@ def test_gaitmap_mocap_strides(gaitmap_walk):
     uplift = _mocap_mae(foot_strides(rec, {"foot": single}), ref)
     liftoff = _mocap_mae(foot_strides(rec, {"foot": {**single, "footstep_tracker": {"integrate_from": "liftoff"}}}), ref)
     assert liftoff > uplift + 0.02 and fst < uplift  # and the double-feet calibration helps
+    c = FootStepTrackerStride().estimate(rec.imu).critical_times_
+    assert (np.diff(c[["t_uplift_s", "t_liftoff_s", "t_landing_s", "t_rest_s"]].to_numpy(), axis=1) >= 0).all()
+    # mocap toe-off lies between our uplift and rest of the same swing, for almost every stride
+    left = ref[ref["foot"] == "left"]
+    inside = [((c["t_uplift_s"] <= tc) & (tc <= c["t_rest_s"])).any() for tc in left["tc_s"]]
+    assert np.mean(inside) > 0.9
 
 
 def test_gaitmap_stairs_rise_and_fall(gaitmap_walk):
