@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from pdr.foot import ZuptInsStride
+from pdr.foot import FootStepTrackerStride, ZuptInsStride
 from pdr.io.importers import import_recordings
 from pdr.io.recording import Recording, load_recording
 from pdr.pipelines.foot import foot_strides
@@ -88,6 +88,18 @@ def run(quick: bool = False) -> list[dict]:
             row(case, f"stride length bias, {name}", round(float(np.mean(err)), 4), "m", "", "")
             z = err / mocap_errors(out.assign(length_m=out["length_std_m"]), ref.assign(length_m=0.0))
             row(case, f"rms(error / length_std_m), {name}", round(float(np.sqrt(np.mean(z**2))), 2), "", "about 1", "")
+
+    # Algorithm 1 against the mocap gait events: consistent offsets (small spread) are what a detector needs
+    offsets = {"uplift - toe-off": ("t_uplift_s", "tc_s"), "liftoff - toe-off": ("t_liftoff_s", "tc_s"),
+               "landing - heel strike": ("t_landing_s", "ic_s"), "rest - heel strike": ("t_rest_s", "ic_s")}
+    crit = {foot: FootStepTrackerStride(foot=foot).estimate(imu).critical_times_
+            for foot, imu in (("left", walk.imu), ("right", walk.extra_imus["foot_right"]))}
+    for name, (col, ref_col) in offsets.items():
+        d = np.array([crit[f][col].to_numpy()[np.argmin(np.abs(crit[f][col].to_numpy() - v))] - v
+                      for f, v in zip(ref["foot"], ref[ref_col])])
+        q25, q50, q75 = np.percentile(d, [25, 50, 75])
+        row(case, f"critical time {name}: median (IQR)", f"{q50:+.3f} ({q75 - q25:.3f})", "s", "",
+            "FootStep-Tracker Algorithm 1; mocap IC/TC events")
 
     ins = ZuptInsStride().estimate(xio.imu)
     dist = float(ins.strides_["length_m"].sum())
