@@ -249,6 +249,8 @@ WALK_ARC_GAIN = 0.6  # vertical excursion / compass-gait arc (Saunders et al. 19
 WALK_LOW_PHASE = 0.04  # the pelvis is lowest this fraction of a stride after heel strike
 RUN_DROP_M = 0.05  # running: knee flexion of ~40 deg in mid stance
 RUN_ARC_GAIN = 0.4  # running vertical excursion ~7-9 cm (Cavanagh & Lafortune 1980)
+IMPACT_TAU_S = 0.025  # heel-strike transient at the trunk: u(x) = x^2 exp(-x), x = time since contact / tau
+IMPACT_ACC_MPS2 = (2.0, 1.5)  # its peak vertical acceleration = a + b * speed (m/s²); forward braking half of it
 MAX_REACH = 0.998  # a leg never straightens fully (knee >= ~4 deg); beyond, the foot is pulled in smoothly
 REACH_SOFTNESS_M = 0.004  # and over which a leaving foot blends from its stance pose into the swing curves
 
@@ -341,6 +343,7 @@ class WalkKinematics:
         ev_t = np.concatenate([bt.t_s[1:] for bt in bouts])
         ev_phase = np.concatenate([bt.phase[1:] for bt in bouts])
         ev_leg = np.round(2 * ev_phase).astype(int) % 2  # 0 = left (integer phase), 1 = right
+        self._hs_t = ev_t
         self.heel_strikes = pd.DataFrame({"t_s": ev_t, "foot": np.where(ev_leg == 0, "left", "right"),
                                           "bout": np.concatenate([np.full(len(bt.t_s) - 1, i) for i, bt in enumerate(bouts)])})
         # Footprints: where each landing foot's contact point is at its heel strike (forward kinematics of the
@@ -391,8 +394,10 @@ class WalkKinematics:
         """Phase (strides), its rate, envelope, amplitude and nominal speed at times t (standing between bouts)."""
         t = np.asarray(t, float)
         b = np.searchsorted(self._bout_t0, t, side="right") - 1
+        k = np.searchsorted(self._hs_t, t, side="right") - 1
+        since = np.where(k >= 0, t - self._hs_t[np.maximum(k, 0)], np.inf)
         out = {"t": t, "bout": b, "phase": np.zeros_like(t), "env": np.zeros_like(t), "amp": np.ones_like(t),
-               "speed": np.ones_like(t), "rate": np.zeros_like(t)}
+               "speed": np.ones_like(t), "rate": np.zeros_like(t), "since_hs": since}
         for i, c in enumerate(self._curves):
             m = b == i
             if not m.any():
@@ -415,7 +420,8 @@ class WalkKinematics:
             if m.any():
                 s[m] = c.s(np.minimum(t[m], c.tn))
         step_ref = STEP_LENGTH_REF_RATIO * self.body.height_m
-        return s + st["env"] * SPEED_FLUCTUATION * st["amp"] * step_ref / (2 * np.pi) * np.sin(4 * np.pi * st["phase"])
+        brake = 0.5 * _impact(st) * (1.0 - run_weight(st["speed"]))
+        return s + st["env"] * SPEED_FLUCTUATION * st["amp"] * step_ref / (2 * np.pi) * np.sin(4 * np.pi * st["phase"]) - brake
 
     def _fk(self, st: dict, leg: int) -> dict[str, np.ndarray]:
         """Sagittal forward kinematics of one leg from the joint-angle curves, relative to its hip (x fwd, z up)."""
@@ -484,7 +490,7 @@ class WalkKinematics:
         stance = stance_fraction(st["speed"])
         walk = WALK_DROP_M + WALK_ARC_GAIN * arc * 0.5 * (1.0 + np.cos(4 * np.pi * (ph - WALK_LOW_PHASE)))
         run = RUN_DROP_M + RUN_ARC_GAIN * arc * 0.5 * (1.0 + np.cos(4 * np.pi * ph - 2 * np.pi * stance))
-        return b.leg_length_m - e * ((1 - w_run) * walk + w_run * run)
+        return b.leg_length_m - e * ((1 - w_run) * walk + w_run * run) + _impact(st)
 
     # ---------------------------------------------------------------------------------------------------------
     def _check_t(self, t_s) -> np.ndarray:
@@ -581,6 +587,14 @@ class WalkKinematics:
         y = -left - np.sum(-left * z, -1, keepdims=True) * z
         y /= np.linalg.norm(y, axis=-1, keepdims=True)
         return j, np.stack([np.cross(y, z), y, z], axis=-1)
+
+
+def _impact(st: dict) -> np.ndarray:
+    """Displacement (m) of the heel-strike transient: the downward motion of the trunk is arrested within tens of
+    ms of contact (Zijlstra & Hof 2003 show the peak in lower-trunk acceleration right after initial contact)."""
+    x = np.minimum(st["since_hs"], 1e3) / IMPACT_TAU_S
+    peak = IMPACT_ACC_MPS2[0] + IMPACT_ACC_MPS2[1] * st["speed"]
+    return st["env"] * peak * IMPACT_TAU_S**2 / 2.0 * x * x * np.exp(-x)
 
 
 def _rot2(angle: np.ndarray, pt: np.ndarray) -> np.ndarray:
