@@ -1,7 +1,8 @@
 """``pdr run REC -o OUT``: the full reconstruction of one recording, and every output of CONTRACT.md.
 
 Stages (each timed in ``summary.json``): load (never ``reference/``) -> steps (``[steps]``, ``[heading]``) -> step lengths
-(``--model`` or ``[step_length]``) -> GNSS in the local frame (``--no-gnss``, ``[gnss] mask_intervals_s``) -> trajectory
+(``--model`` or ``[step_length]``) -> strides (foot IMUs ``[foot]``, leg camera ``[flow]``/``[slip]``; written, not yet fused)
+-> GNSS in the local frame (``--no-gnss``, ``[gnss] mask_intervals_s``) -> trajectory
 -> outputs, written in a temporary folder renamed onto OUT at the end (no half-written output, ever).
 
 The trajectory stage is, for now, a plain dead reckoning of the steps along their heading (:func:`dead_reckon`), with a
@@ -23,9 +24,12 @@ from pdr import __version__
 from pdr.config import load_config
 from pdr.errors import InputError
 from pdr.geo import latlon_to_en
+from pdr.heading import AttitudeStepHeading
 from pdr.io.atomic import atomic_dir
 from pdr.io.recording import Recording, load_recording
-from pdr.pipelines.steps import detect_steps
+from pdr.pipelines.foot import foot_strides
+from pdr.pipelines.leg_camera import camera_strides
+from pdr.pipelines.steps import detect_steps, make_detector
 from pdr.report import (
     write_geojson,
     write_gpx,
@@ -206,10 +210,14 @@ def run_recording(rec: Path, out: Path, *, config_path=None, model_path=None, us
         steps = detect_steps(recording, config).reset_index(drop=True)
         lap("steps_s")
 
-        model.estimate(steps, subject=recording.subject)
+        model.estimate(model.prepare(steps, recording), subject=recording.subject)
         steps["step_length_m"] = np.asarray(model.step_length_m_, float)
         steps["step_length_std_m"] = np.asarray(model.step_length_std_m_, float)
         lap("step_length_s")
+
+        stride_tables = [t for t in (foot_strides(recording, config), camera_strides(recording, config)) if t is not None]
+        strides = pd.concat(stride_tables, ignore_index=True).sort_values("t_end_s", kind="stable") if stride_tables else None
+        lap("strides_s")
 
         gnss = gnss_local(recording, settings) if use_gnss else None
         lap("gnss_s")
@@ -240,6 +248,7 @@ def run_recording(rec: Path, out: Path, *, config_path=None, model_path=None, us
         "recording_id": recording.id,
         "distance_m": distance,
         "n_steps": len(steps),
+        "n_strides": len(strides) if strides is not None else 0,
         "duration_s": float(imu_t[-1] - imu_t[0]),
         "walking_duration_s": float(steps["t_s"].iloc[-1] - steps["t_s"].iloc[0]) if len(steps) > 1 else 0.0,
         "step_model": step_model,
@@ -257,12 +266,16 @@ def run_recording(rec: Path, out: Path, *, config_path=None, model_path=None, us
         "config_file_sha256": sha256_file(Path(config_path)) if config_path is not None else None,
         "model_file_sha256": sha256_file(Path(model_path)) if model_path is not None else None,
         "options": {"use_gnss": use_gnss, "plot": plot},
-        "config": {"input": config, "gnss": settings, "step_length": step_model,
+        "config": {"input": config, "steps": make_detector(config.get("steps"), recording.placement).get_params(),
+                   "heading": AttitudeStepHeading.from_config(config.get("heading")).get_params(),
+                   "gnss": settings, "step_length": step_model,
                    "trajectory": {k: v for k, v in solver.items() if k not in ("iterations", "final_error", "time_s")}},
     }
 
     with atomic_dir(out, force=True) as tmp:
         write_steps_csv(tmp / "steps.csv", steps)
+        if strides is not None:
+            write_strides_csv(tmp / "strides.csv", strides)
         write_trajectory_csv(tmp / "trajectory.csv", traj, origin)
         write_geojson(tmp / "trajectory.geojson", traj, origin, name=recording.id)
         write_tum(tmp / "trajectory.tum", traj)

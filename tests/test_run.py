@@ -1,0 +1,161 @@
+"""``pdr run`` end to end through ``main([...])``: outputs, determinism, atomicity, output-folder rules, bad input."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import pdr.pipelines.run as run_module
+from pdr.cli.main import main
+from pdr.io.recording import Recording, save_recording
+
+from conftest import make_imu
+
+ORIGIN = {"origin_lat_deg": 46.52, "origin_lon_deg": 6.57}
+
+
+def _recording(tmp_path: Path, name: str = "walk", *, gnss: bool = True, broken_reference: bool = False) -> Path:
+    meta = {"recording": {"id": name, "placement": "waist"}, "subject": {"height_m": 1.75}, "geo": dict(ORIGIN)}
+    imu = make_imu(duration_s=20.0, rate_hz=100.0)
+    g = None
+    if gnss:
+        t = np.arange(0.0, 20.0)
+        g = pd.DataFrame({"t_s": t, "lat_deg": ORIGIN["origin_lat_deg"] + 1e-5 * t, "lon_deg": ORIGIN["origin_lon_deg"],
+                          "h_acc_m": 3.0})
+    path = save_recording(Recording(meta=meta, imu=imu, gnss=g), tmp_path / name)
+    if broken_reference:  # run must never read reference/
+        (path / "reference").mkdir()
+        (path / "reference" / "steps.csv").write_text("nonsense\n1\n")
+    return path
+
+
+def _run(capsys, *argv: str) -> tuple[int, str, str]:
+    code = main(["run", *argv])
+    cap = capsys.readouterr()
+    return code, cap.out, cap.err
+
+
+def test_run_writes_every_output(tmp_path, capsys):
+    rec = _recording(tmp_path, broken_reference=True)
+    out = tmp_path / "out"
+    code, stdout, _ = _run(capsys, str(rec), "-o", str(out), "--plot")
+    assert code == 0
+    assert len(stdout.strip().splitlines()) == 1 and "steps" in stdout and str(out) in stdout
+    for name in ("steps.csv", "trajectory.csv", "summary.json", "run.json", "trajectory.geojson", "trajectory.tum",
+                 "trajectory.gpx", "trajectory.png"):
+        assert (out / name).is_file(), name
+    steps = pd.read_csv(out / "steps.csv")
+    assert list(steps.columns[:7]) == ["step_id", "t_s", "step_length_m", "step_length_std_m", "step_freq_hz", "heading_rad", "source"]
+    traj = pd.read_csv(out / "trajectory.csv")
+    assert list(traj.columns) == ["t_s", "e_m", "n_m", "heading_rad", "e_std_m", "n_std_m", "lat_deg", "lon_deg"]
+    assert len(traj) == len(steps) + 1 and len(steps) > 5
+    assert (traj[["e_m", "n_m"]].iloc[0] == 0).all() and np.all(np.diff(traj["t_s"]) > 0)
+    summary = json.loads((out / "summary.json").read_text())
+    for key in ("distance_m", "n_steps", "duration_s", "step_model", "solver", "timings_s", "warnings", "one_line"):
+        assert key in summary
+    assert summary["n_steps"] == len(steps)
+    assert summary["distance_m"] == pytest.approx(np.sum(np.hypot(np.diff(traj["e_m"]), np.diff(traj["n_m"]))), rel=1e-6)
+    assert summary["gnss"]["valid"] == 20
+    prov = json.loads((out / "run.json").read_text())
+    assert prov["pdr_version"] and set(prov["inputs"]) == {"meta.toml", "imu.csv", "gnss.csv"}
+    assert all(len(h) == 64 for h in prov["inputs"].values())
+    assert not list(tmp_path.glob(".out.*"))  # no temporary folder left behind
+
+
+def test_run_is_deterministic(tmp_path, capsys):
+    rec = _recording(tmp_path)
+    for out in ("a", "b"):
+        assert _run(capsys, str(rec), "-o", str(tmp_path / out))[0] == 0
+    for name in ("trajectory.csv", "steps.csv", "run.json", "trajectory.geojson", "trajectory.tum", "trajectory.gpx"):
+        assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes(), name
+
+
+def test_no_gnss_and_mask_intervals(tmp_path, capsys):
+    rec = _recording(tmp_path)
+    assert _run(capsys, str(rec), "-o", str(tmp_path / "a"), "--no-gnss")[0] == 0
+    assert json.loads((tmp_path / "a" / "summary.json").read_text())["gnss"]["fixes"] == 0
+    cfg = tmp_path / "cfg.toml"
+    cfg.write_text("[gnss]\nmask_intervals_s = [[5.0, 9.5], [15, 30]]\n")
+    assert _run(capsys, str(rec), "-o", str(tmp_path / "b"), "--config", str(cfg), "--plot")[0] == 0
+    summary = json.loads((tmp_path / "b" / "summary.json").read_text())
+    assert summary["gnss"]["masked"] == 5 + 5  # t = 5..9 and 15..19
+    prov = json.loads((tmp_path / "b" / "run.json").read_text())
+    assert prov["config"]["gnss"]["mask_intervals_s"] == [[5.0, 9.5], [15.0, 30.0]] and len(prov["config_file_sha256"]) == 64
+
+
+def test_error_mid_run_leaves_no_output(tmp_path, capsys, monkeypatch):
+    rec = _recording(tmp_path)
+
+    def boom(*args, **kwargs):
+        raise RuntimeError("injected failure")
+
+    monkeypatch.setattr(run_module, "write_tum", boom)
+    code, stdout, err = _run(capsys, str(rec), "-o", str(tmp_path / "out"))
+    assert code == 1 and stdout == "" and err.startswith("error:") and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "out").exists() and not list(tmp_path.glob(".out*"))
+
+
+def test_failed_rerun_keeps_the_previous_output(tmp_path, capsys, monkeypatch):
+    rec, out = _recording(tmp_path), tmp_path / "out"
+    assert _run(capsys, str(rec), "-o", str(out))[0] == 0
+    before = {p.name: p.read_bytes() for p in out.iterdir() if p.name != "summary.json"}
+    monkeypatch.setattr(run_module, "write_geojson", lambda *a, **k: (_ for _ in ()).throw(RuntimeError("injected")))
+    assert _run(capsys, str(rec), "-o", str(out), "--plot")[0] == 1
+    assert {p.name: p.read_bytes() for p in out.iterdir() if p.name != "summary.json"} == before
+
+
+def test_output_folder_rules(tmp_path, capsys):
+    rec = _recording(tmp_path)
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / "thesis.txt").write_text("precious")
+    code, _, err = _run(capsys, str(rec), "-o", str(other))
+    assert code == 1 and "--force" in err and (other / "thesis.txt").read_text() == "precious"
+    assert _run(capsys, str(rec), "-o", str(other), "--force")[0] == 0
+    assert not (other / "thesis.txt").exists() and (other / "run.json").is_file()
+    assert _run(capsys, str(rec), "-o", str(other))[0] == 0  # a previous pdr output is replaced without --force
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    assert _run(capsys, str(rec), "-o", str(empty))[0] == 0
+
+
+def _unsorted(tmp_path: Path) -> Path:
+    rec = _recording(tmp_path, "unsorted", gnss=False)
+    lines = (rec / "imu.csv").read_text().splitlines()
+    lines[10], lines[11] = lines[11], lines[10]
+    (rec / "imu.csv").write_text("\n".join(lines) + "\n")
+    return rec
+
+
+def _bad_config(tmp_path: Path) -> tuple[Path, str]:
+    cfg = tmp_path / "bad.toml"
+    cfg.write_text("[gnss]\nmask_intervals_s = [[9.0, 1.0]]\n")
+    return _recording(tmp_path, gnss=True), str(cfg)
+
+
+@pytest.mark.parametrize("case", ["missing", "unsorted", "bad_config", "missing_model", "gnss_typo"])
+def test_bad_input_exit_1_one_line_no_output(tmp_path, capsys, case):
+    extra: list[str] = []
+    if case == "missing":
+        rec = tmp_path / "nope"
+    elif case == "unsorted":
+        rec = _unsorted(tmp_path)
+    elif case == "bad_config":
+        rec, cfg = _bad_config(tmp_path)
+        extra = ["--config", cfg]
+    elif case == "gnss_typo":
+        rec = _recording(tmp_path)
+        (tmp_path / "typo.toml").write_text("[gnss]\nmask_interval_s = []\n")
+        extra = ["--config", str(tmp_path / "typo.toml")]
+    else:
+        rec = _recording(tmp_path)
+        extra = ["--model", str(tmp_path / "no_model.json")]
+    code, stdout, err = _run(capsys, str(rec), "-o", str(tmp_path / "out"), *extra)
+    assert code == 1 and stdout == ""
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error:") and "expected" in lines[0]
+    assert not (tmp_path / "out").exists()
