@@ -159,3 +159,18 @@ def test_bad_input_exit_1_one_line_no_output(tmp_path, capsys, case):
     lines = err.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("error:") and "expected" in lines[0]
     assert not (tmp_path / "out").exists()
+
+
+def test_simulated_walk_run_then_evaluate(tmp_path, capsys):
+    """End to end on a simulated walk whose truth is known (loose bounds: the pieces have their own accuracy tests)."""
+    from pdr.sim import simulate_to_disk
+
+    root = Path(__file__).resolve().parents[1]
+    rec = simulate_to_disk(root / "configs" / "sim" / "walk_short.toml", tmp_path / "sim", seed=3, force=False)
+    assert main(["run", str(rec), "-o", str(tmp_path / "out"), "--plot"]) == 0
+    assert main(["evaluate", str(tmp_path / "out"), str(rec)]) == 0
+    metrics = json.loads(capsys.readouterr().out.split("\n", 1)[1])
+    assert metrics["step_f1_tolerance_s"] == 0.25 and metrics["step_f1"] > 0.85
+    assert abs(metrics["distance_error_pct"]) < 25.0
+    assert metrics["alignment"] in ("none", "origin+heading") and metrics["ate_rmse_m"] < 20.0
+    assert (tmp_path / "out" / "trajectory.gpx").is_file()  # the simulator writes a [geo] origin
