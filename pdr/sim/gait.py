@@ -59,6 +59,7 @@ HIP_SEPARATION_RATIO = 0.095  # distance between the hip joint centres
 HEEL_BEHIND_ANKLE = 0.23  # fraction of the foot length behind the ankle
 ROCKER_RADIUS_FOOT = 1.5  # roll-over radius of the sole, in foot lengths (Hansen et al. 2004: ~0.3 leg length)
 
+FOOT_FLAT_PHASE = (0.03, 0.07, 0.30, 0.12)  # (start, ramp, end, ramp) of foot flat, in phase of the walking curves
 GAIT_START_FRACTION = 0.5  # the pelvis moves about half a step on the first step of a bout and on the last
 RUN_SPEED_MPS = (2.0, 2.6)  # walk-to-run blend of the curves, from fully walking to fully running
 SEGMENTS = ("pelvis", "thigh_left", "shank_left", "foot_left", "thigh_right", "shank_right", "foot_right")
@@ -438,6 +439,10 @@ class WalkKinematics:
         kn = np.radians(e * sa * knee)
         sh = th - kn
         gam = sh + np.radians(e * sa * ankle)  # foot pitch, toe up positive
+        # foot flat: from the end of loading to heel rise the sole lies on the ground (walking)
+        flat = _smoothstep((qw - FOOT_FLAT_PHASE[0]) / FOOT_FLAT_PHASE[1]) * \
+            (1.0 - _smoothstep((qw - FOOT_FLAT_PHASE[2]) / FOOT_FLAT_PHASE[3]))
+        gam = gam * (1.0 - flat * (1.0 - w_run))
         b = self.body
         knee_p = b.thigh_m * np.stack([np.sin(th), -np.cos(th)], -1)
         ankle_p = knee_p + b.shank_m * np.stack([np.sin(sh), -np.cos(sh)], -1)

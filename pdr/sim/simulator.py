@@ -312,7 +312,7 @@ def simulate(scenario: dict[str, Any], seed: int, *, workdir: Path | None = None
                                               baro_drift_hpa_per_h=float(sc.barometer.get("drift_hpa_per_h", 0.3)))
     gnss = gnss_truth = None
     if sc.gnss.enabled:
-        t_g = np.arange(int(np.floor(duration * sc.gnss.rate_hz)) + 1) / sc.gnss.rate_hz
+        t_g = np.arange(int(np.ceil(duration * sc.gnss.rate_hz))) / sc.gnss.rate_hz
         avail = ~_inside(t_g, indoor + [tuple(iv) for iv in sc.gnss.outages_s])
         truth = kin.pelvis_position_m(t_g)
         fixes, gnss_truth = simulate_gnss(sc.gnss, t_g, truth, avail, np.random.default_rng([seed, _RNG_GNSS]))
