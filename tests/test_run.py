@@ -174,3 +174,16 @@ def test_simulated_walk_run_then_evaluate(tmp_path, capsys):
     assert abs(metrics["distance_error_pct"]) < 25.0
     assert metrics["alignment"] in ("none", "origin+heading") and metrics["ate_rmse_m"] < 20.0
     assert (tmp_path / "out" / "trajectory.gpx").is_file()  # the simulator writes a [geo] origin
+
+
+def test_standing_still_gives_the_start_pose_only(tmp_path, capsys):
+    imu = make_imu(duration_s=10.0)
+    imu["acc_z_mps2"] = 9.80665 + 0.01 * np.random.default_rng(1).standard_normal(len(imu))
+    rec = save_recording(Recording(meta={"recording": {"id": "still", "placement": "waist"}}, imu=imu), tmp_path / "still")
+    with pytest.warns(UserWarning, match="no steps|no walking"):
+        code, stdout, _ = _run(capsys, str(rec), "-o", str(tmp_path / "out"), "--plot")
+    assert code == 0 and "0 steps" in stdout
+    traj = pd.read_csv(tmp_path / "out" / "trajectory.csv")
+    assert len(traj) == 1 and len(pd.read_csv(tmp_path / "out" / "steps.csv")) == 0
+    assert not (tmp_path / "out" / "trajectory.gpx").exists()  # no geo origin
+    assert json.loads((tmp_path / "out" / "summary.json").read_text())["distance_m"] == 0.0

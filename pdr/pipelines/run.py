@@ -230,8 +230,6 @@ def run_recording(rec: Path, out: Path, *, config_path=None, model_path=None, us
     run_warnings = [" ".join(str(w.message).split()) for w in caught]
     if gnss is not None and len(gnss):
         run_warnings.append("GNSS fixes are not fused yet: the trajectory is plain dead reckoning")
-    if not len(steps):
-        run_warnings.append("no steps detected: the trajectory is the start pose only")
 
     steps.insert(0, "step_id", np.arange(len(steps), dtype=int))
     steps["source"] = STEP_SOURCE
