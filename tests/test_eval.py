@@ -158,3 +158,19 @@ def test_cli_evaluate_bad_input_one_error_line(tmp_path, capsys, breakage):
     assert main(["evaluate", str(out), str(rec)]) == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("error:") and "expected" in err[0]
+
+
+from hypothesis import given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+
+@settings(max_examples=40, deadline=None)
+@given(angle=st.floats(-3.1, 3.1), de=st.floats(-1e3, 1e3), dn=st.floats(-1e3, 1e3))
+def test_origin_heading_alignment_undoes_any_rigid_motion(angle, de, dn):
+    from pdr.eval import rotate_about
+
+    _, ref = _ref_path()
+    c, s = np.cos(angle), np.sin(angle)
+    est = ref @ np.array([[c, -s], [s, c]]).T + [de, dn]
+    fitted = fit_rotation_about(est, ref, est[0], ref[0])
+    np.testing.assert_allclose(rotate_about(est, fitted, est[0], ref[0]), ref, atol=1e-6)
