@@ -305,5 +305,7 @@ def test_cli_simulate_and_errors(tmp_path, capsys):
         err = capsys.readouterr().err
         assert err.startswith("error:") and len(err.strip().splitlines()) == 1
         assert not (tmp_path / "x").exists()
+    assert main(["simulate", str(SHORT), "-o", str(tmp_path / "z"), "--seed", "-1"]) == 1
+    assert capsys.readouterr().err.startswith("error: simulate: expected a seed")
     assert main(["simulate", str(tmp_path / "missing.toml"), "-o", str(tmp_path / "y")]) == 1
     assert capsys.readouterr().err.startswith("error:")

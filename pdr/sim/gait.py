@@ -555,6 +555,35 @@ class WalkKinematics:
         return {"s_m": ps, "h_m": self._pelvis_h(t, st), "heading_rad": self.route.heading_rad(ps) + off["yaw"],
                 "phase": st["phase"], "envelope": st["env"], "speed_mps": st["speed"]}
 
+    def true_steps(self) -> pd.DataFrame:
+        """``reference/steps.csv``: ``t_s, foot, step_length_m`` (horizontal pelvis distance since the previous
+        contact, or since the start of the bout), ``step_duration_s``, ``bout_id``."""
+        hs = self.heel_strikes
+        t_hs = hs["t_s"].to_numpy()
+        bout = hs["bout"].to_numpy()
+        starts = np.array([b.t_s[0] for b in self.bouts])
+        first = np.r_[True, bout[1:] != bout[:-1]]
+        t_prev = np.where(first, starts[bout], np.r_[t_hs[0], t_hs[:-1]])
+        now, before = self.pelvis_position_m(t_hs), self.pelvis_position_m(t_prev)
+        return pd.DataFrame({"t_s": t_hs, "foot": hs["foot"].to_numpy(),
+                             "step_length_m": np.hypot(*(now[:, :2] - before[:, :2]).T),
+                             "step_duration_s": t_hs - t_prev, "bout_id": bout})
+
+    def true_strides(self) -> pd.DataFrame:
+        """``reference/strides.csv``: heel strike to the next heel strike of the same foot within a bout,
+        ``length_m`` = horizontal displacement of that heel."""
+        rows = []
+        hs = self.heel_strikes
+        for foot in SIDES:
+            sel = hs[hs["foot"] == foot]
+            tt, bb = sel["t_s"].to_numpy(), sel["bout"].to_numpy()
+            heel = self.joint_positions_m(tt)[f"heel_{foot}"] if len(tt) else np.zeros((0, 3))
+            for k in range(len(sel) - 1):
+                if bb[k] == bb[k + 1]:
+                    rows.append((tt[k], tt[k + 1], foot, float(np.hypot(*(heel[k + 1, :2] - heel[k, :2])))))
+        out = pd.DataFrame(rows, columns=["t_start_s", "t_end_s", "foot", "length_m"])
+        return out.sort_values(["t_start_s", "foot"]).reset_index(drop=True)
+
     def pelvis_position_m(self, t_s) -> np.ndarray:
         """(N, 3) world position of the pelvis centre (cheaper than :meth:`joint_positions_m`)."""
         t = self._check_t(t_s)

@@ -36,6 +36,8 @@ class ImuSpec:
     (1-sigma of the draw), ``gyr_bias_walk_radps_per_sqrt_s`` (random walk), ``magnetometer`` and ``barometer``
     (columns on or off), ``mag_noise_ut``, ``mag_hard_iron_ut``, ``hand_yaw_offset_deg`` (phone in hand: yaw
     between the phone's forward axis and the walking direction), ``hand_tilt_deg`` (screen tilt towards the face).
+    Defaults are those of a consumer MEMS unit (angle random walk ~1.4 deg/sqrt(h), turn-on bias ~0.1 deg/s, bias
+    random walk 1e-5 rad/s/sqrt(s), accelerometer bias ~0.05 m/s²).
     """
 
     placement: str = "waist"
@@ -43,8 +45,8 @@ class ImuSpec:
     acc_noise_mps2: float = 0.04
     gyr_noise_radps: float = 0.004
     acc_bias_mps2: float = 0.05
-    gyr_bias_radps: float = 0.003
-    gyr_bias_walk_radps_per_sqrt_s: float = 1e-4
+    gyr_bias_radps: float = 0.002
+    gyr_bias_walk_radps_per_sqrt_s: float = 1e-5
     magnetometer: bool = True
     barometer: bool = True
     mag_noise_ut: float = 0.4

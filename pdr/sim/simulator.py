@@ -202,28 +202,9 @@ def build_walk(sc: Scenario, seed: int) -> WalkKinematics:
 
 
 def _reference(kin: WalkKinematics, sc: Scenario, gnss_truth: pd.DataFrame | None) -> dict[str, Any]:
-    hs = kin.heel_strikes
-    t_hs = hs["t_s"].to_numpy()
-    pelvis_hs = kin.pelvis_position_m(t_hs)
-    starts = np.array([b.t_s[0] for b in kin.bouts])
-    bout = hs["bout"].to_numpy()
-    prev = np.empty_like(pelvis_hs)
-    prev[1:] = pelvis_hs[:-1]
-    first = np.r_[True, bout[1:] != bout[:-1]]
-    prev[first] = kin.pelvis_position_m(starts[bout[first]])
-    step_len = np.hypot(*(pelvis_hs[:, :2] - prev[:, :2]).T)
-    t_prev = np.where(first, starts[bout], np.r_[t_hs[0], t_hs[:-1]])
-    steps = pd.DataFrame({"t_s": t_hs, "foot": hs["foot"], "step_length_m": step_len, "step_duration_s": t_hs - t_prev,
-                          "bout_id": bout})
-    rows = []
-    for foot in ("left", "right"):
-        sel = hs[hs["foot"] == foot]
-        heel = kin.joint_positions_m(sel["t_s"].to_numpy())[f"heel_{foot}"]
-        tt, bb = sel["t_s"].to_numpy(), sel["bout"].to_numpy()
-        for k in range(len(sel) - 1):
-            if bb[k] == bb[k + 1]:
-                rows.append((tt[k], tt[k + 1], foot, float(np.hypot(*(heel[k + 1, :2] - heel[k, :2])))))
-    strides = pd.DataFrame(rows, columns=["t_start_s", "t_end_s", "foot", "length_m"]).sort_values(["t_start_s", "foot"])
+    steps = kin.true_steps()
+    step_len = steps["step_length_m"].to_numpy()
+    strides = kin.true_strides()
     t_traj = np.arange(int(np.floor(sc.duration_s * TRAJECTORY_RATE_HZ)) + 1) / TRAJECTORY_RATE_HZ
     ps = kin.pelvis_state(t_traj)
     pos = kin.pelvis_position_m(t_traj)
@@ -256,7 +237,7 @@ def _reference(kin: WalkKinematics, sc: Scenario, gnss_truth: pd.DataFrame | Non
         summary["gnss_outliers"] = int(gnss_truth["outlier"].sum())
         ok = gnss_truth["outlier"] == 0
         summary["gnss_error_rms_m"] = float(np.sqrt(np.mean(gnss_truth.loc[ok, "error_m"] ** 2))) if ok.any() else float("nan")
-    return {"steps": steps, "strides": strides.reset_index(drop=True), "trajectory": traj, "summary": summary}
+    return {"steps": steps, "strides": strides, "trajectory": traj, "summary": summary}
 
 
 def _render_camera(kin: WalkKinematics, cfg: dict[str, Any], seed: int, workdir: Path, duration_s: float):
@@ -289,6 +270,8 @@ def simulate(scenario: dict[str, Any], seed: int, *, workdir: Path | None = None
     >>> rec.placement, rec.reference["summary"]["n_steps"] > 10
     ('waist', True)
     """
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise InputError(f"simulate: expected a seed that is an integer >= 0, found {seed!r}")
     sc = parse_scenario(scenario, default_id)
     kin = build_walk(sc, seed)
     origin = sc.geo
