@@ -21,6 +21,7 @@ from pdr.sim.gait import WalkKinematics, rotation_zyx
 
 IMU_PLACEMENTS = ("waist", "pocket", "hand", "foot_left", "foot_right", "shank_left", "shank_right")
 G_WORLD = np.array([0.0, 0.0, -GRAVITY_MPS2])
+CHUNK_SAMPLES = 20000
 
 # Sensor axes expressed in the segment frame they ride on (columns: sensor x, y, z).
 _POCKET_IN_THIGH = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])  # phone upright, screen forward
@@ -110,18 +111,29 @@ class SensorPose:
         return j[f"knee_{side}"] + np.einsum("nij,j->ni", rot, np.array([0.04, 0.0, 0.5 * kin.body.shank_m])), rot
 
 
-def true_motion(pose: SensorPose, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def true_motion(pose: SensorPose, t: np.ndarray, oversample: int = 4, dt_s: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Noise-free specific force (N, 3), body angular rate (N, 3), positions and rotations at times t
-    (uniformly spaced)."""
-    dt = float(t[1] - t[0])
-    te = np.concatenate([t[0] - dt * np.arange(2, 0, -1), t, t[-1] + dt * np.arange(1, 3)])
+    (uniformly spaced by ``dt_s``, by default the first interval).
+
+    Like a real IMU's anti-aliasing, each sample is the mean over its interval [t - dt/2, t + dt/2] of the signals
+    computed on a grid ``oversample`` times finer (so integrating the samples gives the true velocity and angle
+    increments even through heel-strike transients).
+    """
+    dt = float(t[1] - t[0]) if dt_s is None else float(dt_s)
+    k = max(int(oversample), 1)
+    h = dt / k
+    offs = (np.arange(k) + 0.5) * h - 0.5 * dt
+    tf = (t[:, None] + offs[None, :]).ravel()
+    te = np.concatenate([tf[0] - h * np.arange(2, 0, -1), tf, tf[-1] + h * np.arange(1, 3)])
     pos, rot = pose(te)
-    acc = (-pos[4:] + 16 * pos[3:-1] - 30 * pos[2:-2] + 16 * pos[1:-3] - pos[:-4]) / (12 * dt * dt)
-    r_mid = rot[2:-2]
-    f = np.einsum("nji,nj->ni", r_mid, acc - G_WORLD)
-    rel = np.einsum("nji,njk->nik", rot[1:-3], rot[3:-1])  # R(t-dt)^T R(t+dt)
-    gyr = Rotation.from_matrix(rel).as_rotvec() / (2 * dt)
-    return f, gyr, pos[2:-2], r_mid
+    acc = (-pos[4:] + 16 * pos[3:-1] - 30 * pos[2:-2] + 16 * pos[1:-3] - pos[:-4]) / (12 * h * h)
+    f = np.einsum("nji,nj->ni", rot[2:-2], acc - G_WORLD)
+    rel = np.einsum("nji,njk->nik", rot[1:-3], rot[3:-1])  # R(t-h)^T R(t+h)
+    gyr = Rotation.from_matrix(rel).as_rotvec() / (2 * h)
+    f = f.reshape(len(t), k, 3).mean(axis=1)
+    gyr = gyr.reshape(len(t), k, 3).mean(axis=1)
+    p_at, r_at = pose(t)
+    return f, gyr, p_at, r_at
 
 
 @dataclasses.dataclass(frozen=True)
@@ -176,7 +188,8 @@ def synthesize_imu(kin: WalkKinematics, spec: ImuSpec, t: np.ndarray, rng: np.ra
                    mag: MagneticField, origin_alt_m: float = 0.0, baro_drift_hpa_per_h: float = 0.3) -> pd.DataFrame:
     """An ``imu.csv`` table of one placement at times t (uniform grid), with all sensor errors."""
     pose = SensorPose(kin, spec, rng)
-    f, w, pos, rot = true_motion(pose, t)
+    parts = [true_motion(pose, t[i:i + CHUNK_SAMPLES], dt_s=1.0 / spec.rate_hz) for i in range(0, len(t), CHUNK_SAMPLES)]  # bounded memory
+    f, w, pos, rot = (np.concatenate([p[k] for p in parts]) for k in range(4))
     n = len(t)
     dt = float(t[1] - t[0])
     acc = f + spec.acc_bias_mps2 * rng.standard_normal(3) + spec.acc_noise_mps2 * rng.standard_normal((n, 3))
