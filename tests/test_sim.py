@@ -6,7 +6,6 @@ import copy
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 import pytest
 
 from pdr.cli.main import main
@@ -309,3 +308,35 @@ def test_cli_simulate_and_errors(tmp_path, capsys):
     assert capsys.readouterr().err.startswith("error: simulate: expected a seed")
     assert main(["simulate", str(tmp_path / "missing.toml"), "-o", str(tmp_path / "y")]) == 1
     assert capsys.readouterr().err.startswith("error:")
+
+
+def test_a_too_short_walk_warns_and_stands():
+    with pytest.warns(UserWarning, match="too short"):
+        rec = simulate(_scenario([(2.0, 0.0), (0.6, 1.2), (3.0, 0.0), (15.0, 1.2)], gnss={"enabled": False}), seed=1)
+    assert rec.reference["steps"]["t_s"].min() > 5.6  # no step in the 0.6 s burst
+
+
+def test_camera_hook_renders_a_leg_camera_video(tmp_path):
+    from pdr.sim import camera
+
+    try:
+        camera.load_texture("gravel")
+    except InputError:
+        pytest.skip("ground_textures_cc0 not available")
+    sc = _scenario([(1.0, 0.0), (4.0, 1.3)], gnss={"enabled": False})
+    sc["camera"] = {"fps": 20.0, "focal_px": 80.0, "cx_px": 39.5, "cy_px": 29.5, "width_px": 80, "height_px": 60,
+                    "segment": "shank_left", "distance_from_knee_m": 0.25, "texture": "gravel",
+                    "t_start_s": 1.5, "t_end_s": 2.5}
+    rec = load_recording(_simulate_and_save(sc, tmp_path / "cam"))
+    assert rec.video_path is not None and rec.video_path.name == "video.avi"
+    assert rec.camera["mount"]["segment"] == "shank_left" and len(rec.frames) == 21
+    assert rec.frames["t_s"].iloc[0] == pytest.approx(1.5)
+
+
+def _simulate_and_save(scenario: dict, out: Path) -> Path:
+    import tempfile
+
+    from pdr.io.recording import save_recording
+
+    with tempfile.TemporaryDirectory() as tmp:
+        return save_recording(simulate(scenario, seed=3, workdir=Path(tmp)), out)

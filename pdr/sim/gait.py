@@ -19,6 +19,7 @@ Frames: world = local east-north-up (m). Segment frames: ``pelvis`` and ``foot_*
 from __future__ import annotations
 
 import dataclasses
+import warnings
 from typing import Sequence
 
 import numpy as np
@@ -223,7 +224,10 @@ def plan_walk(segments: Sequence[tuple[float, float]], user: GaitUser, body: Bod
             times.append(tk)
             lengths.append(float(user.step_length_m(v, body.leg_length_m)) * float(np.clip(1.0 + cv * eps, 0.4, 1.8)))
             vs.append(v)
-        if len(times) >= 4:
+        if len(times) < 4:
+            warnings.warn(f"walk: the moving segments from {tb:.1f} s to {te:.1f} s are too short for 3 steps; "
+                          f"the person stands instead", stacklevel=3)
+        else:
             n = len(times) - 1
             lengths[0] *= GAIT_START_FRACTION  # from standing, and back to feet together
             lengths[-1] *= GAIT_START_FRACTION
@@ -348,36 +352,20 @@ class WalkKinematics:
         self.heel_strikes = pd.DataFrame({"t_s": ev_t, "foot": np.where(ev_leg == 0, "left", "right"),
                                           "bout": np.concatenate([np.full(len(bt.t_s) - 1, i) for i, bt in enumerate(bouts)])})
         # Footprints: where each landing foot's contact point is at its heel strike (forward kinematics of the
-        # swing leg from the prescribed pelvis), and how far above the ground the curves put it then.
-        self._fp_t = {0: np.array([-np.inf]), 1: np.array([-np.inf])}
-        self._fp_s = {}
-        self._fp_gc = {}
-        self._fp_dh = {}
+        # swing leg from the prescribed pelvis), and how far above the ground the curves put it then (the foot
+        # settles over TOUCH_DOWN_PHASE). Index 0: standing before the first step.
         stand = self._fk(self._state(np.array([-1e6])), 0)
+        self._fp_t, self._fp_s, self._fp_gc, self._fp_dh = {}, {}, {}, {}
         for leg in (0, 1):
-            self._fp_s[leg] = np.array([float(stand["contact"][0, 0])])
-            self._fp_gc[leg] = np.array([float(stand["gc"][0])])
-            self._fp_dh[leg] = np.zeros(1)
-        for leg in (0, 1):  # the pelvis height at a strike comes from the other (stance) leg only
             tt = ev_t[ev_leg == leg]
             st = self._state(tt)
             fk = self._fk(st, leg)
             off = self._pelvis_offsets(st)
-            ps = self._pelvis_s(tt, st)
-            self._fp_s[leg] = np.concatenate([self._fp_s[leg], ps + off[f"fwd{leg}"] + fk["contact"][:, 0]])
-            self._fp_gc[leg] = np.concatenate([self._fp_gc[leg], fk["gc"]])
-            self._fp_t[leg] = np.concatenate([self._fp_t[leg], tt])
-        dh = {}
-        for leg in (0, 1):
-            self._fp_dh[leg] = np.zeros(len(self._fp_t[leg]))
-        for leg in (0, 1):
-            tt = self._fp_t[leg][1:]
-            st = self._state(tt)
-            fk = self._fk(st, leg)
-            off = self._pelvis_offsets(st)
-            ph = self._pelvis_h(tt, st)
-            dh[leg] = np.concatenate([[0.0], ph + off[f"up{leg}"] + fk["contact"][:, 1] * np.cos(self._tilt(fk, off, leg))])
-        self._fp_dh = dh
+            self._fp_t[leg] = np.concatenate([[-np.inf], tt])
+            self._fp_s[leg] = np.concatenate([stand["contact"][:, 0], self._pelvis_s(tt, st) + off[f"fwd{leg}"] + fk["contact"][:, 0]])
+            self._fp_gc[leg] = np.concatenate([stand["gc"], fk["gc"]])
+            height = self._pelvis_h(tt, st) + off[f"up{leg}"] + fk["contact"][:, 1] * np.cos(self._tilt(fk, off, leg))
+            self._fp_dh[leg] = np.concatenate([[0.0], height])
 
     # ---------------------------------------------------------------------------------------------------------
     @classmethod
