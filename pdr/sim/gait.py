@@ -61,6 +61,7 @@ HEEL_BEHIND_ANKLE = 0.23  # fraction of the foot length behind the ankle
 ROCKER_RADIUS_FOOT = 1.5  # roll-over radius of the sole, in foot lengths (Hansen et al. 2004: ~0.3 leg length)
 
 FOOT_FLAT_PHASE = (0.03, 0.07, 0.30, 0.12)  # (start, ramp, end, ramp) of foot flat, in phase of the walking curves
+REF_FROUDE_SPEED = 0.45  # v / sqrt(g l) of a natural walking pace
 GAIT_START_FRACTION = 0.5  # the pelvis moves about half a step on the first step of a bout and on the last
 RUN_SPEED_MPS = (2.0, 2.6)  # walk-to-run blend of the curves, from fully walking to fully running
 SEGMENTS = ("pelvis", "thigh_left", "shank_left", "foot_left", "thigh_right", "shank_right", "foot_right")
@@ -125,13 +126,14 @@ class Body:
 class GaitUser:
     """Per-user gait coefficients (drawn once per simulated person).
 
-    Step length follows a Froude-scaled walk-ratio law: L / l = c (v / sqrt(g l)) ** beta (l = leg length;
+    Step length follows a Froude-scaled walk-ratio law: L / l = c (v_hat / v_ref) ** beta with the dimensionless
+    speed v_hat = v / sqrt(g l) (l = leg length, v_ref = 0.45, about 1.35 m/s for an adult;
     Grieve & Gear 1966, Sekiya & Nagasaki 1998: step length ~ sqrt(speed), a near-constant walk ratio), and
     frequency f = v / L. Per-step variability of length has a coefficient of variation ``cv_slow`` at 0.6 m/s
     falling to ``cv_fast`` at 1.7 m/s and above (Ladetto et al. 2000 observed about 15% and 4%).
     """
 
-    length_coef: float = 1.16
+    length_coef: float = 0.78  # step length / leg length at the reference speed
     length_exponent: float = 0.5
     cv_slow: float = 0.15
     cv_fast: float = 0.04
@@ -146,7 +148,7 @@ class GaitUser:
     def draw(cls, rng: np.random.Generator, *, cv_slow: float = 0.15, cv_fast: float = 0.04) -> "GaitUser":
         """A random adult (population spreads of the coefficients)."""
         z = rng.standard_normal(8)
-        return cls(length_coef=1.16 * (1 + 0.06 * z[0]), length_exponent=float(np.clip(0.5 + 0.04 * z[1], 0.4, 0.6)),
+        return cls(length_coef=float(0.78 * (1 + 0.05 * z[0])), length_exponent=float(np.clip(0.5 + 0.05 * z[1], 0.38, 0.62)),
                    cv_slow=cv_slow, cv_fast=cv_fast, step_width_m=float(np.clip(0.10 + 0.02 * z[2], 0.05, 0.16)),
                    sway_m=float(np.clip(0.025 + 0.006 * z[3], 0.01, 0.04)),
                    pelvic_rotation_deg=float(np.clip(4.0 + 1.0 * z[4], 1.5, 7.0)),
@@ -154,7 +156,7 @@ class GaitUser:
 
     def step_length_m(self, speed_mps, leg_length_m: float):
         v_hat = np.maximum(np.asarray(speed_mps, float), 0.05) / np.sqrt(GRAVITY_MPS2 * leg_length_m)
-        return leg_length_m * self.length_coef * v_hat ** self.length_exponent
+        return leg_length_m * self.length_coef * (v_hat / REF_FROUDE_SPEED) ** self.length_exponent
 
     def step_freq_hz(self, speed_mps, leg_length_m: float):
         return np.maximum(np.asarray(speed_mps, float), 0.05) / self.step_length_m(speed_mps, leg_length_m)
