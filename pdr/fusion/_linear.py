@@ -1,0 +1,91 @@
+"""Closed-form (linear least-squares) updates of the parameters that enter the step factors linearly.
+
+The step length ``A + B f + C v`` and a heading-rate bias ``b(t)`` (gyro) or heading offset ``beta(t)`` (magnetometer)
+enter the per-step measurements linearly. Given the poses, each is a small weighted least-squares problem with a
+Gaussian prior; :class:`~pdr.fusion.graph.FactorGraphFusion` alternates these with the pose solve (block coordinate
+descent on the joint objective), which keeps every per-step factor a built-in one.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.linalg import solveh_banded
+
+
+@dataclass
+class StepModelParams:
+    """Regression step model ``length = a + b f + c v`` as arrays: ``theta = [a, b, c]`` and its prior covariance."""
+
+    theta: np.ndarray
+    covariance: np.ndarray
+    residual_std_m: float
+
+
+def step_model_params(model, prior_std: tuple[float, float, float]) -> StepModelParams:
+    """Read a RegressionStepLength-like object (``a_m, b_m_per_hz, c_m_per_m2ps4, residual_std_m, covariance``)."""
+    theta = np.array([model.a_m, model.b_m_per_hz, model.c_m_per_m2ps4], float)
+    cov = getattr(model, "covariance", None)
+    cov = np.diag(np.square(prior_std)) if cov is None else np.asarray(cov, float).reshape(3, 3)
+    return StepModelParams(theta=theta, covariance=cov, residual_std_m=float(model.residual_std_m))
+
+
+def solve_step_model(distance_m: np.ndarray, features: np.ndarray, std_m: np.ndarray,
+                     prior: StepModelParams) -> tuple[np.ndarray, np.ndarray]:
+    """MAP of ``theta`` for ``distance_i = features_i . theta + e_i``, ``e_i ~ N(0, std_i^2)``, prior ``N(theta0, P0)``.
+
+    Returns ``(theta, covariance)``; the covariance is conditional on the distances (the poses)."""
+    w = 1.0 / np.square(std_m)
+    p0_inv = np.linalg.inv(prior.covariance)
+    info = features.T @ (features * w[:, None]) + p0_inv
+    rhs = features.T @ (w * distance_m) + p0_inv @ prior.theta
+    cov = np.linalg.inv(info)
+    return cov @ rhs, cov
+
+
+@dataclass
+class SmoothSeries:
+    """A scalar function of time, piecewise linear between knots spaced ``knot_s`` apart, with a random-walk prior
+    between knots (``rw_per_sqrt_s``) and a zero-mean prior of ``prior_std`` on the first knot."""
+
+    t0_s: float
+    knot_s: float
+    values: np.ndarray
+
+    def __call__(self, t_s: np.ndarray) -> np.ndarray:
+        knots = self.t0_s + self.knot_s * np.arange(len(self.values))
+        return np.interp(t_s, knots, self.values)
+
+
+def zero_series(t_s: np.ndarray, knot_s: float) -> SmoothSeries:
+    n = int(np.ceil((t_s[-1] - t_s[0]) / knot_s)) + 2
+    return SmoothSeries(t0_s=float(t_s[0]), knot_s=knot_s, values=np.zeros(n))
+
+
+def solve_series(like: SmoothSeries, t_s: np.ndarray, y: np.ndarray, scale: np.ndarray, std: np.ndarray,
+                 rw_per_sqrt_s: float, prior_std: float) -> SmoothSeries:
+    """MAP knot values for ``y_i = scale_i f(t_i) + e_i``; a tridiagonal normal system solved in O(n)."""
+    n = len(like.values)
+    u = (t_s - like.t0_s) / like.knot_s
+    j = np.clip(np.floor(u).astype(int), 0, n - 2)
+    frac = np.clip(u - j, 0.0, 1.0)
+    a0, a1 = scale * (1.0 - frac), scale * frac
+    w = 1.0 / np.square(std)
+    diag = np.zeros(n)
+    off = np.zeros(n - 1)
+    rhs = np.zeros(n)
+    np.add.at(diag, j, w * a0 * a0)
+    np.add.at(diag, j + 1, w * a1 * a1)
+    np.add.at(off, j, w * a0 * a1)
+    np.add.at(rhs, j, w * a0 * y)
+    np.add.at(rhs, j + 1, w * a1 * y)
+    rw = 1.0 / (rw_per_sqrt_s ** 2 * like.knot_s)
+    diag[:-1] += rw
+    diag[1:] += rw
+    off -= rw
+    diag[0] += 1.0 / prior_std ** 2
+    banded = np.zeros((2, n))
+    banded[0, 1:] = off
+    banded[1] = diag
+    return SmoothSeries(t0_s=like.t0_s, knot_s=like.knot_s, values=solveh_banded(banded, rhs))

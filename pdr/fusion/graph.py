@@ -1,0 +1,450 @@
+"""Batch factor-graph fusion (Levenberg-Marquardt smoothing) of steps, strides, heading and intermittent GNSS."""
+
+from __future__ import annotations
+
+import time
+import warnings
+from typing import Any
+
+import gtsam
+import numpy as np
+import pandas as pd
+
+from pdr.base import Algorithm
+from pdr.errors import InputError
+from pdr.fusion import factors
+from pdr.fusion._inputs import BOUT_START_HEADING_STD_RAD, Problem, empty_trajectory, prepare, wrap_rad
+from pdr.fusion._linear import SmoothSeries, solve_series, solve_step_model, step_model_params, zero_series
+from pdr.step_length import RegressionStepLength
+
+GNSS_FACTORS = ("shifted", "interpolated")
+CHI2_2DOF_999 = 13.816  # 99.9% quantile of chi-square with 2 degrees of freedom
+ANDERSON_DEPTH = 5  # past iterates used by the Anderson acceleration of the alternation
+
+
+def dead_reckoning_poses(problem: Problem, length_m: np.ndarray, dtheta_rad: np.ndarray,
+                         start: tuple[float, float, float]) -> np.ndarray:
+    """(N + 1, 3) poses ``e, n, heading`` of the step chain from ``start``: each step along the new heading."""
+    heading = start[2] + np.concatenate([[0.0], np.cumsum(dtheta_rad)])
+    e = start[0] + np.concatenate([[0.0], np.cumsum(length_m * np.cos(heading[1:]))])
+    n = start[1] + np.concatenate([[0.0], np.cumsum(length_m * np.sin(heading[1:]))])
+    return np.column_stack([e, n, heading])
+
+
+def interpolate_positions(poses: np.ndarray, k: np.ndarray, alpha: np.ndarray) -> np.ndarray:
+    if len(poses) == 1:
+        return np.repeat(poses[:1, :2], len(k), axis=0)
+    return (1.0 - alpha)[:, None] * poses[k, :2] + alpha[:, None] * poses[k + 1, :2]
+
+
+def align_to_fixes(poses: np.ndarray, problem: Problem) -> np.ndarray:
+    """Rigidly move a dead-reckoned chain onto the GNSS fixes (2-D Procrustes, twice, dropping the worst third of
+    the fixes the second time so that outliers do not set the start); only the initial estimate depends on this."""
+    pos = interpolate_positions(poses, problem.gnss_k, problem.gnss_alpha)
+    z = problem.gnss_en_m
+    keep = np.ones(len(z), bool)
+    rot, shift = np.eye(2), np.zeros(2)
+    for _ in range(2):
+        p, q = pos[keep], z[keep]
+        pc, qc = p.mean(axis=0), q.mean(axis=0)
+        if len(p) >= 2 and np.ptp(p, axis=0).max() > 5.0 and np.ptp(q, axis=0).max() > 5.0:
+            u, _, vt = np.linalg.svd((p - pc).T @ (q - qc))
+            d = np.sign(np.linalg.det(vt.T @ u.T))
+            rot = vt.T @ np.diag([1.0, d]) @ u.T
+        shift = qc - rot @ pc
+        resid = np.linalg.norm(pos @ rot.T + shift - z, axis=1)
+        if len(z) >= 6:
+            keep = resid <= np.quantile(resid, 0.67)
+    out = poses.copy()
+    out[:, :2] = poses[:, :2] @ rot.T + shift
+    out[:, 2] = poses[:, 2] + np.arctan2(rot[1, 0], rot[0, 0])
+    return out
+
+
+def course_correction(poses: np.ndarray, problem: Problem, window_s: float = 30.0) -> tuple[np.ndarray, float] | None:
+    """Heading correction of a dead-reckoned chain from the GNSS course: over windows of ``window_s`` the angle between
+    the fixes' displacement and the chain's, median-filtered over 5 windows (robust to outliers) and unwrapped.
+    Returns the correction at every epoch and its slope (rad/s, minus the mean heading-rate bias), or None when
+    fewer than 3 windows qualify. Only the initial estimate depends on this."""
+    t, z = problem.gnss_t_s, problem.gnss_en_m
+    p = interpolate_positions(poses, problem.gnss_k, problem.gnss_alpha)
+    if len(t) < 2:
+        return None
+    j = np.arange(len(t))
+    j2 = np.searchsorted(t, t + window_s)
+    ok = (j2 < len(t)) & (j % 5 == 0)
+    j, j2 = j[ok], j2[ok]
+    dz, dp = z[j2] - z[j], p[j2] - p[j]
+    ok = (np.linalg.norm(dz, axis=1) > 10.0) & (np.linalg.norm(dp, axis=1) > 10.0) & (t[j2] - t[j] < 3.0 * window_s)
+    if ok.sum() < 3:
+        return None
+    angle = wrap_rad(np.arctan2(dz[ok, 1], dz[ok, 0]) - np.arctan2(dp[ok, 1], dp[ok, 0]))
+    angle = np.unwrap(angle)
+    angle = pd.Series(angle).rolling(5, center=True, min_periods=1).median().to_numpy()
+    t_mid = 0.5 * (t[j[ok]] + t[j2[ok]])
+    slope = float(np.polyfit(t_mid, angle, 1)[0])
+    return np.interp(problem.epoch_t_s, t_mid, angle), slope
+
+
+def trajectory_frame(problem: Problem, poses: np.ndarray, pos_std: np.ndarray) -> pd.DataFrame:
+    return pd.DataFrame({"t_s": problem.epoch_t_s, "e_m": poses[:, 0], "n_m": poses[:, 1],
+                         "heading_rad": wrap_rad(poses[:, 2]), "e_std_m": pos_std[:, 0], "n_std_m": pos_std[:, 1]})
+
+
+class FactorGraphFusion(Algorithm):
+    """Batch (smoothing) fusion of a walk in a GTSAM factor graph, solved by Levenberg-Marquardt.
+
+    One ``Pose2`` (east, north, heading) per step epoch: the start pose, then the pose at each step's contact.
+
+    Parameters
+    ----------
+    default_step_length_std_m, default_heading_change_std_rad
+        Per-step noise where the steps table gives none (m, rad).
+    lateral_std_m
+        Noise across each step (m): sway of the body, and what keeps the step covariance full rank.
+    default_h_acc_m
+        1-sigma GNSS accuracy of fixes without ``h_acc_m`` (m).
+    gnss_time_tolerance_s
+        Fixes up to this far before the start / after the last step are tied to the first / last pose; others unused.
+    gnss_factor
+        ``"shifted"`` (default; built-in ``PoseTranslationPrior2D`` on the nearest epoch, the fix moved by the
+        current estimate of the path between that epoch and the fix time) or ``"interpolated"`` (a Python
+        ``CustomFactor`` on the two poses around the fix, linear interpolation). Both interpolate, none snaps.
+    huber_k
+        Huber threshold (whitened units) of every robust factor (GNSS, magnetometer heading, strides).
+    gnss_gate_chi2
+        A fix whose squared whitened residual exceeds this after a solve is rejected (2-dof chi-square 99.9%).
+    calibrate_step_model
+        Estimate the regression parameters ``(A, B, C)`` from the data while reconstructing (needs the feature
+        columns ``step_freq_hz``, ``acc_var_m2ps4`` and at least two used fixes or stride factors).
+    prior_a_std_m, prior_b_std_m_per_hz, prior_c_std_m_per_m2ps4
+        Prior standard deviations of ``(A, B, C)`` where the step model carries no ``covariance``.
+    gyro_bias_knot_s, gyro_bias_rw_radps_per_sqrt_s, gyro_bias_prior_std_radps
+        Heading-rate bias of the relative heading changes: piecewise linear between knots this far apart, a random
+        walk between knots, zero-mean prior.
+    mag_offset_knot_s, mag_offset_rw_rad_per_sqrt_s, mag_offset_prior_std_rad
+        The same for the slowly varying offset of the magnetometer heading.
+    max_alternations, alternation_tol_m
+        Outer iterations of (pose solve, closed-form parameter update) and the stop criterion: the largest change
+        of the predicted step lengths and of the heading corrections (times the step length), in metres.
+    compute_covariance
+        Marginal covariance of every pose (``e_std_m``, ``n_std_m``); False leaves them NaN and saves time.
+
+    Attributes
+    ----------
+    trajectory_ : DataFrame
+        ``t_s, e_m, n_m, heading_rad, e_std_m, n_std_m``: the start pose, then one row per step.
+    step_model_ : the calibrated regression step model (same class as the one given), or the one given.
+    step_length_m_ : ndarray
+        Per-step length after fusion (distance between consecutive poses along the step).
+    gnss_used_ : ndarray of bool
+        One per GNSS row: True if the fix was used and not rejected by the chi-square gate.
+    gyro_bias_radps_, mag_offset_rad_ : ndarray
+        The estimated heading-rate bias at each step and magnetometer offset at each step.
+    solver_ : dict
+        ``method, iterations`` (LM, summed), ``alternations, final_error, time_s, marginals_time_s, gnss_used,
+        gnss_rejected, converged``.
+
+    Notes
+    -----
+    Factors: ``BetweenFactorPose2`` per step (length ``A + B f + C v`` along the heading turned by the gyro heading
+    change minus the bias), ``RangeFactorPose2`` per stride, robust ``PoseRotationPrior2D`` per magnetometer heading
+    (minus the offset), GNSS factors behind a Huber kernel plus a chi-square gate, a prior on the start pose (tight
+    at the origin and the first step's heading when nothing absolute is known, the documented default; very weak
+    otherwise). Parameters that enter the step measurements linearly (step model after Ladetto et al. 2000,
+    ``length = A + B f + C v``; heading-rate bias; magnetometer offset) are solved in closed form given the poses,
+    alternating with the pose solve (block coordinate descent on the joint least-squares objective), so every
+    per-step factor stays built-in (a shared (A, B, C) variable in 10,000 Python factors is not tractable, see
+    DESIGN.md). Covariances: ``gtsam.Marginals`` of the final graph, rotated from the pose frame to east-north;
+    they are conditional on the calibrated parameters.
+
+    Examples
+    --------
+    >>> fusion = FactorGraphFusion().fuse(steps, gnss=fixes, step_model=model)  # doctest: +SKIP
+    >>> fusion.trajectory_[["e_m", "n_m"]].iloc[-1]  # doctest: +SKIP
+    """
+
+    def __init__(self, *, default_step_length_std_m: float = 0.05, default_heading_change_std_rad: float = 0.01,
+                 lateral_std_m: float = 0.02, default_h_acc_m: float = 5.0, gnss_time_tolerance_s: float = 1.0,
+                 gnss_factor: str = "shifted", huber_k: float = 1.345, gnss_gate_chi2: float = CHI2_2DOF_999,
+                 calibrate_step_model: bool = True, prior_a_std_m: float = 0.2, prior_b_std_m_per_hz: float = 0.1,
+                 prior_c_std_m_per_m2ps4: float = 0.02, gyro_bias_knot_s: float = 60.0,
+                 gyro_bias_rw_radps_per_sqrt_s: float = 1e-5, gyro_bias_prior_std_radps: float = 0.01,
+                 mag_offset_knot_s: float = 60.0, mag_offset_rw_rad_per_sqrt_s: float = 0.005,
+                 mag_offset_prior_std_rad: float = 0.3, max_alternations: int = 12, alternation_tol_m: float = 0.002,
+                 compute_covariance: bool = True):
+        self.default_step_length_std_m = default_step_length_std_m
+        self.default_heading_change_std_rad = default_heading_change_std_rad
+        self.lateral_std_m = lateral_std_m
+        self.default_h_acc_m = default_h_acc_m
+        self.gnss_time_tolerance_s = gnss_time_tolerance_s
+        self.gnss_factor = gnss_factor
+        self.huber_k = huber_k
+        self.gnss_gate_chi2 = gnss_gate_chi2
+        self.calibrate_step_model = calibrate_step_model
+        self.prior_a_std_m = prior_a_std_m
+        self.prior_b_std_m_per_hz = prior_b_std_m_per_hz
+        self.prior_c_std_m_per_m2ps4 = prior_c_std_m_per_m2ps4
+        self.gyro_bias_knot_s = gyro_bias_knot_s
+        self.gyro_bias_rw_radps_per_sqrt_s = gyro_bias_rw_radps_per_sqrt_s
+        self.gyro_bias_prior_std_radps = gyro_bias_prior_std_radps
+        self.mag_offset_knot_s = mag_offset_knot_s
+        self.mag_offset_rw_rad_per_sqrt_s = mag_offset_rw_rad_per_sqrt_s
+        self.mag_offset_prior_std_rad = mag_offset_prior_std_rad
+        self.max_alternations = max_alternations
+        self.alternation_tol_m = alternation_tol_m
+        self.compute_covariance = compute_covariance
+
+    # ------------------------------------------------------------------------------------------------------------
+    def _check_params(self) -> None:
+        if self.gnss_factor not in GNSS_FACTORS:
+            raise InputError(f"gnss_factor: expected one of {', '.join(GNSS_FACTORS)}, found {self.gnss_factor!r}")
+        positive = ["default_step_length_std_m", "default_heading_change_std_rad", "lateral_std_m", "default_h_acc_m",
+                    "huber_k", "gnss_gate_chi2", "gyro_bias_knot_s", "gyro_bias_rw_radps_per_sqrt_s",
+                    "gyro_bias_prior_std_radps", "mag_offset_knot_s", "mag_offset_rw_rad_per_sqrt_s",
+                    "mag_offset_prior_std_rad", "alternation_tol_m", "prior_a_std_m", "prior_b_std_m_per_hz",
+                    "prior_c_std_m_per_m2ps4"]
+        for name in positive:
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and np.isfinite(value) and value > 0):
+                raise InputError(f"{type(self).__name__} {name}: expected a number > 0, found {value!r}")
+        if not (isinstance(self.max_alternations, int) and self.max_alternations >= 1):
+            raise InputError(f"max_alternations: expected an integer >= 1, found {self.max_alternations!r}")
+
+    def _prepare(self, steps, gnss, strides, t_start_s) -> Problem | None:
+        return prepare(steps, gnss, strides, t_start_s=t_start_s,
+                       default_step_length_std_m=self.default_step_length_std_m,
+                       default_heading_change_std_rad=self.default_heading_change_std_rad,
+                       default_h_acc_m=self.default_h_acc_m, gnss_time_tolerance_s=self.gnss_time_tolerance_s)
+
+    def _empty(self, gnss: pd.DataFrame | None, step_model) -> FactorGraphFusion:
+        self.trajectory_ = empty_trajectory()
+        self.step_model_ = step_model
+        self.step_length_m_ = np.zeros(0)
+        self.gnss_used_ = np.zeros(0 if gnss is None else len(gnss), bool)
+        self.gyro_bias_radps_ = np.zeros(0)
+        self.mag_offset_rad_ = np.zeros(0)
+        self.solver_ = {"method": "levenberg_marquardt", "iterations": 0, "alternations": 0, "final_error": 0.0,
+                        "time_s": 0.0, "marginals_time_s": 0.0, "gnss_used": 0, "gnss_rejected": 0, "converged": True}
+        return self
+
+    # ------------------------------------------------------------------------------------------------------------
+    def fuse(self, steps: pd.DataFrame, *, gnss: pd.DataFrame | None = None, strides: pd.DataFrame | None = None,
+             step_model=None, t_start_s: float | None = None) -> FactorGraphFusion:
+        """Reconstruct the walk. ``t_start_s``: time of the start pose (default: one step duration before the first
+        step). ``step_model``: a ``RegressionStepLength`` (prior of the calibration); None: the population preset."""
+        t_begin = time.perf_counter()
+        self._check_params()
+        problem = self._prepare(steps, gnss, strides, t_start_s)
+        if problem is None:
+            return self._empty(gnss, step_model)
+        n = problem.n_steps
+        n_fix = len(problem.gnss_row)
+        absolute = n_fix >= 1
+        observable = n_fix >= 2 or len(problem.stride_length_m) > 0
+        feats_ok = (np.isfinite(problem.features).all(axis=1) if problem.features is not None else np.zeros(n, bool))
+        regression = step_model is None or isinstance(step_model, RegressionStepLength)
+        calibrate = bool(self.calibrate_step_model and regression and observable and problem.features is not None
+                         and feats_ok.sum() >= 3)
+        model_prior = None
+        if calibrate:
+            if step_model is None:
+                step_model = RegressionStepLength.population()
+            model_prior = step_model_params(step_model, (self.prior_a_std_m, self.prior_b_std_m_per_hz,
+                                                         self.prior_c_std_m_per_m2ps4))
+        has_mag = np.isfinite(problem.mag_rad)
+        estimate_bias = n_fix >= 2 or bool(has_mag.any())
+        bias = zero_series(problem.epoch_t_s, self.gyro_bias_knot_s)
+        offset = zero_series(problem.epoch_t_s, self.mag_offset_knot_s)
+        nb = len(bias.values)
+        dt = problem.step_duration_s
+        known_turn = problem.dtheta_std_rad < BOUT_START_HEADING_STD_RAD
+        known_turn[0] = False
+        t_step = problem.epoch_t_s[1:]
+        model_cov = None
+        theta0 = model_prior.theta if calibrate else np.zeros(3)
+        params = np.concatenate([theta0, bias.values, offset.values])
+        # each parameter in metres of effect on the path (convergence test and acceleration)
+        mean_length = float(np.mean(problem.step_length_m)) if n else 1.0
+        mean_speed = mean_length / float(np.median(dt)) if n else 1.0
+        feat_scale = np.abs(np.nanmean(problem.features[feats_ok], axis=0)) if calibrate else np.ones(3)
+        scale = np.concatenate([feat_scale, np.full(nb, 0.5 * self.gyro_bias_knot_s ** 2 * mean_speed),
+                                np.full(len(offset.values), 10.0 * mean_length)])
+
+        def unpack(p: np.ndarray) -> tuple[np.ndarray, np.ndarray, SmoothSeries]:
+            b = SmoothSeries(bias.t0_s, bias.knot_s, p[3:3 + nb])
+            o = SmoothSeries(offset.t0_s, offset.knot_s, p[3 + nb:])
+            length = (np.where(feats_ok, np.nan_to_num(problem.features) @ p[:3], problem.step_length_m)
+                      if calibrate else problem.step_length_m)
+            return length, problem.dtheta_rad - b(t_step) * dt, o
+
+        def update(poses: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+            """The closed-form parameter solve given the poses (each block kept where it is not observable)."""
+            out, cov = p.copy(), None
+            if estimate_bias:
+                resid = wrap_rad(np.diff(poses[:, 2]) - problem.dtheta_rad)
+                ok = known_turn & (dt > 0)
+                if ok.sum() >= 2:
+                    out[3:3 + nb] = solve_series(bias, t_step[ok], resid[ok], -dt[ok], problem.dtheta_std_rad[ok],
+                                                 self.gyro_bias_rw_radps_per_sqrt_s,
+                                                 self.gyro_bias_prior_std_radps).values
+            if has_mag.any():
+                y = wrap_rad(problem.mag_rad[has_mag] - poses[1:, 2][has_mag])
+                t_mag = t_step[has_mag]
+                current = SmoothSeries(offset.t0_s, offset.knot_s, p[3 + nb:])
+                inlier = np.abs(wrap_rad(y - current(t_mag))) <= 5.0 * problem.mag_std_rad[has_mag]
+                if inlier.any():
+                    out[3 + nb:] = solve_series(offset, t_mag[inlier], y[inlier], np.ones(int(inlier.sum())),
+                                                problem.mag_std_rad[has_mag][inlier], self.mag_offset_rw_rad_per_sqrt_s,
+                                                self.mag_offset_prior_std_rad).values
+            if calibrate:
+                along = self._along_track(poses)
+                out[:3], cov = solve_step_model(along[feats_ok], problem.features[feats_ok],
+                                                problem.step_length_std_m[feats_ok], model_prior)
+            return out, cov
+
+        length0, dtheta0, _ = unpack(params)
+        poses = dead_reckoning_poses(problem, length0, dtheta0, (0.0, 0.0, problem.heading0_rad))
+        correction = course_correction(poses, problem) if n_fix >= 2 else None
+        if correction is not None:  # start from the GNSS course: a gyro bias can turn the chain by whole turns
+            if estimate_bias:
+                params[3:3 + nb] = -correction[1]
+            length0, dtheta0, _ = unpack(params)
+            poses = dead_reckoning_poses(problem, length0, dtheta0 - correction[1] * dt + np.diff(correction[0]),
+                                         (0.0, 0.0, problem.heading0_rad + correction[0][0]))
+        if absolute:
+            poses = align_to_fixes(poses, problem)
+        use = np.ones(n_fix, bool)
+        lm_iterations, final_error, converged, alternation = 0, 0.0, False, 0
+        graph = None
+        history_f: list[np.ndarray] = []
+        history_g: list[np.ndarray] = []
+        prev_f = prev_g = None
+        for alternation in range(1, self.max_alternations + 1):
+            length_now, dtheta_now, offset_now = unpack(params)
+            graph = self._graph(problem, poses, length_now, dtheta_now, offset_now, use, absolute)
+            poses, iters, final_error = self._solve(graph, poses)
+            lm_iterations += iters
+            pos = interpolate_positions(poses, problem.gnss_k, problem.gnss_alpha)
+            d2 = np.sum(np.square(pos - problem.gnss_en_m), axis=1) / np.square(problem.gnss_std_m)
+            new_use = d2 <= self.gnss_gate_chi2
+            if n_fix and not new_use.any():
+                new_use = d2 <= np.median(d2)  # never reject every fix: keep the better half
+            mapped, cov = update(poses, params)
+            if cov is not None:
+                model_cov = cov
+            f = (mapped - params) * scale
+            same_gate = np.array_equal(new_use, use)
+            if np.max(np.abs(f), initial=0.0) <= self.alternation_tol_m and same_gate:
+                converged = True
+                break
+            # Anderson acceleration of the fixed point params = update(solve(params)); restarted when the gate changes
+            if not same_gate or prev_f is None or np.linalg.norm(f) > 2.0 * np.linalg.norm(prev_f):
+                history_f.clear()
+                history_g.clear()
+            else:
+                history_f.append(f - prev_f)
+                history_g.append(mapped - prev_g)
+                del history_f[:-ANDERSON_DEPTH], history_g[:-ANDERSON_DEPTH]
+            prev_f, prev_g = f, mapped
+            if history_f:
+                gamma = np.linalg.lstsq(np.column_stack(history_f), f, rcond=None)[0]
+                params = mapped - np.column_stack(history_g) @ gamma
+            else:
+                params = mapped
+            use = new_use
+        theta = params[:3]
+        bias = SmoothSeries(bias.t0_s, bias.knot_s, params[3:3 + nb])
+        offset = SmoothSeries(offset.t0_s, offset.knot_s, params[3 + nb:])
+        t_marg = time.perf_counter()
+        pos_std = np.full((n + 1, 2), np.nan)
+        if self.compute_covariance:
+            pos_std = self._marginal_std(graph, poses)
+        t_end = time.perf_counter()
+
+        self.trajectory_ = trajectory_frame(problem, poses, pos_std)
+        self.step_length_m_ = self._along_track(poses)
+        self.gnss_used_ = np.zeros(problem.gnss_n_rows, bool)
+        self.gnss_used_[problem.gnss_row] = use
+        self.gyro_bias_radps_ = bias(problem.epoch_t_s[1:])
+        self.mag_offset_rad_ = offset(problem.epoch_t_s[1:])
+        if calibrate:
+            self.step_model_ = type(step_model)(a_m=float(theta[0]), b_m_per_hz=float(theta[1]),
+                                                c_m_per_m2ps4=float(theta[2]),
+                                                residual_std_m=model_prior.residual_std_m, covariance=(model_cov if model_cov is not None else model_prior.covariance).tolist())
+        else:
+            self.step_model_ = step_model
+        self.solver_ = {"method": "levenberg_marquardt", "iterations": lm_iterations, "alternations": alternation,
+                        "final_error": final_error, "time_s": t_end - t_begin, "marginals_time_s": t_end - t_marg,
+                        "gnss_used": int(use.sum()), "gnss_rejected": int((~use).sum()), "converged": converged,
+                        "gnss_factor": self.gnss_factor, "step_model_calibrated": calibrate}
+        return self
+
+    # ------------------------------------------------------------------------------------------------------------
+    @staticmethod
+    def _along_track(poses: np.ndarray) -> np.ndarray:
+        d = np.diff(poses[:, :2], axis=0)
+        return d[:, 0] * np.cos(poses[1:, 2]) + d[:, 1] * np.sin(poses[1:, 2])
+
+    def _graph(self, problem: Problem, poses: np.ndarray, length: np.ndarray, dtheta: np.ndarray,
+               offset: SmoothSeries, use: np.ndarray, absolute: bool) -> gtsam.NonlinearFactorGraph:
+        graph = gtsam.NonlinearFactorGraph()
+        if absolute:
+            graph.add(factors.start_prior(gtsam.Pose2(*poses[0]), anchored=False))
+        else:
+            graph.add(factors.start_prior(gtsam.Pose2(0.0, 0.0, problem.heading0_rad), anchored=True))
+        for i in range(problem.n_steps):
+            graph.add(factors.step_factor(i, length[i], dtheta[i], problem.step_length_std_m[i],
+                                          problem.dtheta_std_rad[i], self.lateral_std_m))
+        mag_idx = np.flatnonzero(np.isfinite(problem.mag_rad))
+        mag = problem.mag_rad[mag_idx] - offset(problem.epoch_t_s[1:][mag_idx])
+        for i, m in zip(mag_idx, mag):
+            graph.add(factors.heading_factor(i + 1, m, problem.mag_std_rad[i], self.huber_k))
+        for (k0, k1), length_m, std in zip(problem.stride_k, problem.stride_length_m, problem.stride_std_m):
+            graph.add(factors.stride_factor(k0, k1, length_m, std, self.huber_k))
+        idx = np.flatnonzero(use)
+        k, alpha = problem.gnss_k[idx], problem.gnss_alpha[idx]
+        if self.gnss_factor == "interpolated" and problem.n_steps > 0:
+            for j, kk, a in zip(idx, k, alpha):
+                graph.add(factors.gnss_interpolated_factor(kk, a, problem.gnss_en_m[j],
+                                                           factors.gnss_noise(problem.gnss_std_m[j], self.huber_k)))
+        else:
+            nearest = np.where(alpha < 0.5, k, np.minimum(k + 1, problem.n_steps))
+            shift = poses[nearest, :2] - interpolate_positions(poses, k, alpha)
+            for j, m, s in zip(idx, nearest, shift):
+                graph.add(factors.gnss_shifted_factor(m, problem.gnss_en_m[j], s,
+                                                      factors.gnss_noise(problem.gnss_std_m[j], self.huber_k)))
+        return graph
+
+    @staticmethod
+    def _solve(graph: gtsam.NonlinearFactorGraph, poses: np.ndarray) -> tuple[np.ndarray, int, float]:
+        initial = gtsam.Values()
+        for i, p in enumerate(poses):
+            initial.insert(factors.pose_key(i), gtsam.Pose2(*p))
+        params = gtsam.LevenbergMarquardtParams()
+        params.setRelativeErrorTol(1e-6)
+        params.setMaxIterations(100)
+        try:
+            optimizer = gtsam.LevenbergMarquardtOptimizer(graph, initial, params)
+            result = optimizer.optimize()
+        except RuntimeError as exc:  # gtsam's "Indeterminant linear system" and friends never reach the user
+            raise InputError(f"fusion: the factor graph could not be solved (expected every pose to be constrained "
+                             f"by steps and an anchor; gtsam says: {str(exc).splitlines()[0]})") from None
+        return gtsam.utilities.extractPose2(result), optimizer.iterations(), optimizer.error()
+
+    @staticmethod
+    def _marginal_std(graph: gtsam.NonlinearFactorGraph, poses: np.ndarray) -> np.ndarray:
+        values = gtsam.Values()
+        for i, p in enumerate(poses):
+            values.insert(factors.pose_key(i), gtsam.Pose2(*p))
+        try:
+            marginals = gtsam.Marginals(graph, values)
+        except RuntimeError as exc:
+            warnings.warn(f"fusion: marginal covariances unavailable ({str(exc).splitlines()[0]}); e_std_m/n_std_m are NaN",
+                          stacklevel=3)
+            return np.full((len(poses), 2), np.nan)
+        out = np.empty((len(poses), 2))
+        for i, p in enumerate(poses):
+            cov = factors.world_position_cov(marginals.marginalCovariance(factors.pose_key(i)), p[2])
+            out[i] = np.sqrt(np.maximum(np.diag(cov), 0.0))
+        return out
