@@ -13,6 +13,7 @@ import dataclasses
 
 import numpy as np
 import pandas as pd
+from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
 from pdr.constants import GRAVITY_MPS2
@@ -22,6 +23,7 @@ from pdr.sim.gait import WalkKinematics, rotation_zyx
 IMU_PLACEMENTS = ("waist", "pocket", "hand", "foot_left", "foot_right", "shank_left", "shank_right")
 G_WORLD = np.array([0.0, 0.0, -GRAVITY_MPS2])
 CHUNK_SAMPLES = 20000
+STEEL_RANGE_M = 10.0  # a steel dipole of 25 µT at 1 m adds < 0.03 µT beyond
 
 # Sensor axes expressed in the segment frame they ride on (columns: sensor x, y, z).
 _POCKET_IN_THIGH = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])  # phone upright, screen forward
@@ -153,13 +155,17 @@ class MagneticField:
         return self.field_ut * np.array([np.cos(inc) * np.sin(dec), np.cos(inc) * np.cos(dec), -np.sin(inc)])
 
     def at(self, pos: np.ndarray) -> np.ndarray:
-        """World field (µT) at positions (N, 3)."""
+        """World field (µT) at positions (N, 3); sources farther than ``STEEL_RANGE_M`` are neglected."""
         b = np.broadcast_to(self.earth_enu(), pos.shape).copy()
+        if not len(self.sources_enu):
+            return b
+        near = cKDTree(self.sources_enu).query(pos, distance_upper_bound=STEEL_RANGE_M)[0] < np.inf
+        p = pos[near]
         for src, m in zip(self.sources_enu, self.moments):
-            r = pos - src
+            r = p - src
             d = np.maximum(np.linalg.norm(r, axis=1), 0.3)
             rh = r / d[:, None]
-            b += self.steel_ut * (3 * (rh @ m)[:, None] * rh - m) / d[:, None] ** 3
+            b[near] += self.steel_ut * (3 * (rh @ m)[:, None] * rh - m) / d[:, None] ** 3
         return b
 
 
