@@ -18,7 +18,9 @@ from pdr.io.recording import Recording
 from pdr.slip.fit import SlipOpticalFlowStride
 
 CAMERA_KEYS = ("fps", "focal_px", "cx_px", "cy_px", "width_px", "height_px")
-ANKLE_HEIGHT_M = 0.08  # the SLIP's shank reaches the ground (knee to heel), the subject's ends at the ankle
+ANKLE_HEIGHT_RATIO = 0.039  # ankle height / body height (Winter 2009, Table 4.1)
+DEFAULT_HEIGHT_M = 1.75
+# the SLIP's shank reaches the ground (knee to heel), the subject's shank_length_m ends at the ankle
 
 
 def _camera(cfg: dict[str, Any]) -> tuple[dict[str, float], dict[str, Any]]:
@@ -78,7 +80,8 @@ def camera_strides(rec: Recording, config: dict) -> pd.DataFrame | None:
     if "thigh_length_m" in subject:
         slip_defaults["thigh_length_m"] = float(subject["thigh_length_m"])
     if "shank_length_m" in subject:
-        slip_defaults["shank_length_m"] = float(subject["shank_length_m"]) + ANKLE_HEIGHT_M
+        ankle = ANKLE_HEIGHT_RATIO * float(subject.get("height_m", DEFAULT_HEIGHT_M))
+        slip_defaults["shank_length_m"] = float(subject["shank_length_m"]) + ankle
     if "foot_length_m" in subject:
         slip_defaults["foot_length_m"] = float(subject["foot_length_m"])
     if "mass_kg" in subject:

@@ -104,6 +104,9 @@ class SlipOpticalFlowStride(Algorithm):
     integral_weight : weight of the per-stride mean-flow difference (the image displacement of the stride,
         which fixes the stride length through f / D) relative to the sample-by-sample differences.
     strides_per_fit : strides fitted together (thesis: 2, assumed equal).
+    length_from : "model": the fitted SLIP's stride length (eq. 4.3, the thesis); "flow": that length times the
+        ratio of the measured to the simulated image displacement over the stride (the fitted model supplies the
+        flow-to-metres scale f / D, the measurement the displacement; default, far less sensitive to the fit).
     n_refine : best starts (grid and Table 2) refined by the local optimiser.
     max_evals : function evaluations per local refinement.
     duration_weight : weight of the squared log ratio of simulated to measured stride time in the cost
@@ -139,9 +142,9 @@ class SlipOpticalFlowStride(Algorithm):
     def __init__(self, *, thigh_length_m: float = 0.5, shank_length_m: float = 0.6, foot_length_m: float = 0.2,
                  mass_kg: float = 50.0, camera_from_knee_m: float = 0.28, focal_px: float = 1340.0,
                  swing_ratio: float = 1.2, swing_peak_fraction: float = 0.25, swing_profile: str = "heel", swing_clearance_ratio: float = 0.05,
-                 integral_weight: float = 100.0,
+                 integral_weight: float = 10.0,
                  strides_per_fit: int = 2,
-                 n_refine: int = 2, max_evals: int = 60, duration_weight: float = 0.0, length_scale: float = 1.0,
+                 length_from: str = "flow", n_refine: int = 2, max_evals: int = 60, duration_weight: float = 0.0, length_scale: float = 1.0,
                  model_sigma_fraction: float = 0.03, min_quality: float = 0.3, foot: str = "left"):
         self.thigh_length_m = thigh_length_m
         self.shank_length_m = shank_length_m
@@ -155,6 +158,7 @@ class SlipOpticalFlowStride(Algorithm):
         self.swing_clearance_ratio = swing_clearance_ratio
         self.integral_weight = integral_weight
         self.strides_per_fit = strides_per_fit
+        self.length_from = length_from
         self.n_refine = n_refine
         self.max_evals = max_evals
         self.duration_weight = duration_weight
@@ -218,6 +222,8 @@ class SlipOpticalFlowStride(Algorithm):
             raise InputError(f"SlipOpticalFlowStride: expected t_s, flow and quality of one length, found {t.shape}, {f.shape}, {q.shape}")
         if len(t) > 1 and (not np.isfinite(t).all() or (np.diff(t) <= 0).any()):
             raise InputError("SlipOpticalFlowStride: expected finite, strictly increasing t_s, found unsorted, repeated or NaN times")
+        if self.length_from not in ("flow", "model"):
+            raise InputError(f"SlipOpticalFlowStride: expected length_from 'flow' or 'model', found {self.length_from!r}")
         if self.foot not in ("left", "right"):
             raise InputError(f"SlipOpticalFlowStride: expected foot 'left' or 'right', found {self.foot!r}")
         q = np.where(np.isfinite(f) & np.isfinite(q), np.clip(q, 0.0, 1.0), 0.0)
@@ -260,7 +266,12 @@ class SlipOpticalFlowStride(Algorithm):
                 if w0 + per > n and i < w0:
                     continue  # the last, short window re-used earlier strides: keep their first estimate
                 s = segs.iloc[i]
-                rows.append((s.t_start_s, s.t_end_s, self.foot, fit["length_m"], fit["length_std_m"], "leg_camera"))
+                length, sigma = fit["length_m"], fit["length_std_m"]
+                if self.length_from == "flow":  # each stride its own image displacement, at the window's scale
+                    k = idx.index(i)
+                    disp = float(np.trapezoid(windows[k][1], windows[k][0]))
+                    length, sigma = fit["m_per_px"] * disp, sigma * disp / max(fit["length_m"] / fit["m_per_px"], 1e-9)
+                rows.append((s.t_start_s, s.t_end_s, self.foot, length, sigma, "leg_camera"))
         if rows:
             self.strides_ = pd.DataFrame(rows, columns=STRIDE_COLUMNS)
         self.fits_ = pd.DataFrame(fits)
@@ -317,7 +328,14 @@ class SlipOpticalFlowStride(Algorithm):
         if sim is None or best.fun >= 1e29:
             return None
         r = self._residuals(sim, windows)
-        length = sim[2]
+        meas_disp = float(np.mean([np.trapezoid(w[1], w[0]) for w in windows]))  # image displacement per stride, px
+
+        def stride_length(sm):
+            if self.length_from == "model":
+                return sm[2]  # eq. 4.3: the SLIP's own stride
+            return sm[2] * meas_disp / max(float(np.trapezoid(sm[1], sm[0])), 1e-9)
+
+        length = stride_length(sim)
         # Gauss-Newton covariance of the parameters -> sigma of the stride length
         n_res = len(r)
         s2 = float(r @ r) / max(n_res - 4, 1)
@@ -332,7 +350,7 @@ class SlipOpticalFlowStride(Algorithm):
                 continue
             d = pj[j] - p[j]
             jac[:, j] = (rj - r) / d
-            grad[j] = (simj[2] - length) / d
+            grad[j] = (stride_length(simj) - length) / d
         jtj = jac.T @ jac
         try:
             var_fit = float(grad @ np.linalg.pinv(jtj, rcond=1e-10) @ grad) * s2
@@ -344,7 +362,8 @@ class SlipOpticalFlowStride(Algorithm):
         return dict(vx_mps=p[0], vy_mps=p[1], leg_angle_rad=p[2], stiffness_npm=p[3], cost=float(best.fun),
                     rms_pxps=float(np.sqrt(float(r @ r) / max(w.sum(), 1e-9))), sim_duration_s=sim[3],
                     meas_duration_s=tm_total / len(windows), stance_fraction=stance, length_m=length_m,
-                    length_std_m=sigma, time_s=_time.perf_counter() - t0)
+                    length_std_m=sigma, m_per_px=length_m / meas_disp if meas_disp > 0 else float("nan"),
+                    time_s=_time.perf_counter() - t0)
 
 
 def calibrate_slip_body(estimator: SlipOpticalFlowStride, t_s, forward_flow_pxps, quality, *, true_length_m: float,
