@@ -308,15 +308,18 @@ class WalkKinematics:
     Notes
     -----
     The pelvis moves along the route by a C2 spline through its positions at the heel strikes (spaced by the
-    planned step lengths), with a within-step speed fluctuation (fastest at heel strike, slowest in mid stance).
-    Joint angles are Fourier series of normative walking and running curves (constants above), blended by speed,
-    phase-warped to the stance fraction, and scaled about the standing posture by the step length and by an
-    envelope that starts and ends each bout from standing. Swing legs follow the curves (forward kinematics from
-    the hip). A stance foot rolls without slipping on a circular rocker sole (Hansen, Childress & Knox 2004,
-    roll-over shapes) with its pitch from the curves; the leg reaches it by two-link inverse kinematics, and the
-    pelvis height is the inverted-pendulum height over the stance foot(s) with the curves' knee flexion, blended
-    over double support (a cubic Hermite bridge over the flight phase of running). Lateral: pelvis sway toward the
-    stance side, feet on lanes half a step width either side of the route.
+    planned step lengths), with a within-step speed fluctuation (fastest at heel strike, slowest in mid stance)
+    and a heel-strike transient. Its height follows an inverted-pendulum arc (compass-gait excursion
+    l - sqrt(l^2 - (L/2)^2) scaled by 0.6 for the determinants of gait; lowest just after heel strike), or when
+    running is lowest in mid stance and highest in flight. Pelvic rotation, obliquity and tilt oscillate with the
+    gait phase. Joint angles are Fourier series of normative walking and running curves (constants above),
+    blended by speed, phase-warped to the stance fraction, and scaled about the standing posture by the step
+    length and by an envelope that starts and ends each bout from standing. Swing legs follow the curves (forward
+    kinematics from the hip). A stance foot rolls without slipping on a circular rocker sole (Hansen, Childress &
+    Knox 2004, roll-over shapes) with its pitch from the curves, lying flat from the end of loading to heel rise;
+    the leg reaches it by two-link inverse kinematics (so stance hip and knee angles follow from the geometry).
+    Lift-off and touch-down blend the stance and swing ankle paths in position and velocity. Lateral: pelvis sway
+    toward the stance side, feet on lanes half a step width either side of the route.
 
     Example
     -------
