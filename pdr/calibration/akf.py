@@ -26,24 +26,30 @@ class AdaptiveKalmanCalibration(Algorithm):
     process_std_init_m : initial process noise per step (the paper: 10 cm).
     process_std_min_m : floor of the adapted process noise per step.
     innovation_window : number of recent innovations whose spread sets the process noise.
-    segment_steps : steps per GNSS segment (a segment ends at the first usable fix this many steps after its start).
+    segment_steps : steps per GNSS segment of the filter (a segment ends at the first usable fix this many steps
+        after its start).
+    model_segment_steps : the same for the segments the model's parameters are fitted on: longer chords average the
+        slowly varying part of the GNSS error (a 20-step chord of a phone receiver is off by ~10%, a 60-step one ~5%).
     min_segment_steps, max_h_acc_m, assumed_h_acc_m, min_straightness, min_step_m, max_step_m : the segment gates
         of :func:`pdr.calibration.segments.gnss_segments` (``assumed_h_acc_m`` for fixes without ``h_acc_m``).
     min_freq_spread_hz : the segments see "several walking frequencies" when the standard deviation of their mean
         step frequencies reaches this; otherwise only A (the first parameter) is updated.
     outlier_h_acc_factor, gnss_smoothing_s : GNSS outlier test and local line fit before the segments
         (:func:`pdr.calibration.segments.clean_fixes`; 0 s = no smoothing).
+    adapt_gnss_noise : scale the GNSS part of the measurement noise to the residuals of a first fit (see Notes).
 
     Attributes
     ----------
     model_ : the calibrated model (same class as the one given; parameters and covariance updated).
     updated_ : which parameters were updated: ``"all"``, the name of the first parameter (one frequency), or ``"none"``.
-    segments_ : every candidate GNSS segment (``gnss_segments`` columns + ``rec_index``, ``measured_std_m``,
-        ``model_step_m``, ``innovation_m``, ``freq_hz``), with ``used`` and the rejection ``reason``.
+    segments_ : every candidate GNSS segment of the filter (``gnss_segments`` columns + ``rec_index``,
+        ``measured_std_m``, ``model_step_m``, ``innovation_m``, ``freq_hz``), with ``used`` and the rejection ``reason``.
+    model_segments_ : the same for the (longer) segments of the model fit.
     trace_ : per step, the filter's course: ``rec_index, t_s, model_step_m`` (uncalibrated prediction),
         ``step_length_m`` / ``step_length_std_m`` (filtered), ``process_std_m`` (adapted).
     step_length_m_, step_length_std_m_ : the filtered step length per step (all recordings, in order).
-    n_steps_, distance_m_ : steps and GNSS metres inside the used segments.
+    n_steps_, distance_m_ : steps and GNSS metres inside the used segments of the model fit.
+    gnss_noise_scale_ : factor on the GNSS part of the measurement noise, from the residuals of a first fit.
 
     Notes
     -----
@@ -51,7 +57,9 @@ class AdaptiveKalmanCalibration(Algorithm):
     ``GPS distance / number of steps = step(k) + n(k)`` over a segment. Here the mean of u is the model's predicted
     change from step k-1 to k (zero for a model with A only, which is the paper's filter), so the state is the model's
     prediction plus a slowly varying correction, and a segment measures the mean of the state over its steps.
-    Measurement noise: 5 cm (plus the GNSS accuracy of the segment); process noise: 10 cm initially, then adapted from
+    Measurement noise: 5 cm plus the GNSS part ``sqrt(2) h_acc / (n straightness)``, scaled (0.25-2) so that the
+    residuals of a first fit of the model match it (consecutive fixes share their slowly varying error, so h_acc
+    alone overstates the error of a chord); process noise: 10 cm initially, then adapted from
     the distribution of the recent innovations v (innovation-based adaptive estimation, Mohamed & Schwarz 1999):
     ``q = max(q_min, mean(v^2 - R - P+) / steps between updates)`` -- larger residuals, larger process noise, so a
     change of pace is followed within a few segments and a steady pace is averaged over many.
@@ -71,7 +79,8 @@ class AdaptiveKalmanCalibration(Algorithm):
                  process_std_min_m: float = 0.002, innovation_window: int = 3, segment_steps: float = 20.0,
                  min_segment_steps: float = 8.0, max_h_acc_m: float = 10.0, assumed_h_acc_m: float = 5.0,
                  min_straightness: float = 0.9, min_step_m: float = 0.2, max_step_m: float = 1.6,
-                 min_freq_spread_hz: float = 0.1, outlier_h_acc_factor: float = 5.0, gnss_smoothing_s: float = 2.0):
+                 min_freq_spread_hz: float = 0.1, outlier_h_acc_factor: float = 5.0, gnss_smoothing_s: float = 2.0,
+                 adapt_gnss_noise: bool = True, model_segment_steps: float = 60.0):
         self.measurement_std_m = measurement_std_m
         self.process_std_init_m = process_std_init_m
         self.process_std_min_m = process_std_min_m
@@ -86,12 +95,15 @@ class AdaptiveKalmanCalibration(Algorithm):
         self.min_freq_spread_hz = min_freq_spread_hz
         self.outlier_h_acc_factor = outlier_h_acc_factor
         self.gnss_smoothing_s = gnss_smoothing_s
+        self.adapt_gnss_noise = adapt_gnss_noise
+        self.model_segment_steps = model_segment_steps
 
     def _check(self) -> None:
         if not isinstance(self.gnss_smoothing_s, (int, float)) or not self.gnss_smoothing_s >= 0:
             raise InputError(f"AdaptiveKalmanCalibration: expected gnss_smoothing_s >= 0 (s), found {self.gnss_smoothing_s!r}")
         for name in ("measurement_std_m", "process_std_init_m", "process_std_min_m", "segment_steps", "min_segment_steps",
-                     "max_h_acc_m", "assumed_h_acc_m", "max_step_m", "outlier_h_acc_factor"):
+                     "max_h_acc_m", "assumed_h_acc_m", "max_step_m", "outlier_h_acc_factor",
+                     "model_segment_steps"):
             v = getattr(self, name)
             if not isinstance(v, (int, float)) or isinstance(v, bool) or not np.isfinite(v) or v <= 0:
                 raise InputError(f"AdaptiveKalmanCalibration: expected {name} a positive number, found {v!r}")
@@ -113,34 +125,62 @@ class AdaptiveKalmanCalibration(Algorithm):
         if not (len(steps_list) == len(gnss_list) == len(subjects)):
             raise InputError(f"AdaptiveKalmanCalibration: expected as many GNSS tables and subjects as steps tables, "
                              f"found {len(steps_list)} steps, {len(gnss_list)} GNSS, {len(subjects)} subjects")
-        seg_tables, traces, rows_x = [], [], []
-        for r, (st, gn, subj) in enumerate(zip(steps_list, gnss_list, subjects)):
+        prepared = []
+        for st, subj in zip(steps_list, subjects):
             x = model.design(st, subj) if len(st) else np.empty((0, len(model.theta_names)))
-            pred = np.clip(x @ model.theta, 0.0, None)
-            segs = gnss_segments(st, gn if gn is not None else _NO_GNSS, **self._seg_args())
-            segs = segs.assign(rec_index=r)
-            segs["measured_std_m"] = np.sqrt(self.measurement_std_m ** 2
-                                             + 2.0 * (segs["h_acc_m"] / (segs["n_steps"] * segs["straightness"])) ** 2)
-            freq = st["step_freq_hz"].to_numpy(float) if "step_freq_hz" in st.columns else np.full(len(st), np.nan)
-            segs["freq_hz"] = [float(np.nanmean(freq[a:b + 1])) if b >= a and np.isfinite(freq[a:b + 1]).any() else np.nan
-                               for a, b in zip(segs["k_first"], segs["k_last"])]
-            segs["model_step_m"] = [float(pred[a:b + 1].mean()) if b >= a else np.nan
-                                    for a, b in zip(segs["k_first"], segs["k_last"])]
+            prepared.append((st, x, np.clip(x @ model.theta, 0.0, None)))
+        filt_segs, _ = self._segments(prepared, gnss_list, self.segment_steps)
+        model_segs, design = self._segments(prepared, gnss_list, self.model_segment_steps)
+        used = model_segs["used"].to_numpy(bool)
+        # measurement noise: 5 cm plus the GNSS part, scaled to the residuals of a first fit (consecutive fixes share
+        # their slowly varying error, and smoothing removes white noise, so h_acc alone is pessimistic)
+        self.gnss_noise_scale_ = 1.0
+        self._set_noise(model_segs)
+        if self.adapt_gnss_noise and used.sum() > len(model.theta_names) + 2:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                first, _ = self._update_model(model, design[used], model_segs[used])
+            resid = model_segs.loc[used, "measured_step_m"].to_numpy() - design[used] @ first.theta
+            excess = resid ** 2 - self.measurement_std_m ** 2 - float(model.residual_std_m) ** 2 / model_segs.loc[used, "n_steps"]
+            ratio = float(np.mean(excess) / np.mean(model_segs.loc[used, "gnss_std_m"] ** 2))
+            self.gnss_noise_scale_ = float(np.clip(np.sqrt(max(ratio, 0.0)), 0.25, 2.0))
+            self._set_noise(model_segs)
+        self._set_noise(filt_segs)
+        traces, innovations = [], []
+        for r, (st, x, pred) in enumerate(prepared):
+            segs = filt_segs[filt_segs["rec_index"] == r].reset_index(drop=True)
             trace, innov = self._filter(st["t_s"].to_numpy(float), pred, x, segs, model)
-            segs["innovation_m"] = innov
             traces.append(trace.assign(rec_index=r))
-            seg_tables.append(segs)
-            rows_x.append([x[a:b + 1].mean(axis=0) for a, b in zip(segs["k_first"], segs["k_last"])])
-        self.segments_ = pd.concat(seg_tables, ignore_index=True)
+            innovations.append(innov)
+        filt_segs["innovation_m"] = np.concatenate(innovations) if innovations else np.empty(0)
+        self.segments_ = filt_segs.drop(columns="gnss_std_m")
+        self.model_segments_ = model_segs.drop(columns="gnss_std_m")
         self.trace_ = pd.concat(traces, ignore_index=True)[list(TRACE_COLUMNS)]
         self.step_length_m_ = self.trace_["step_length_m"].to_numpy(float)
         self.step_length_std_m_ = self.trace_["step_length_std_m"].to_numpy(float)
-        used = self.segments_["used"].to_numpy(bool)
-        self.n_steps_ = float(self.segments_.loc[used, "n_steps"].sum())
-        self.distance_m_ = float(self.segments_.loc[used, "distance_m"].sum())
-        design = np.array([row for rows in rows_x for row in rows]).reshape(-1, len(model.theta_names))
-        self.model_, self.updated_ = self._update_model(model, design[used], self.segments_[used])
+        self.n_steps_ = float(model_segs.loc[used, "n_steps"].sum())
+        self.distance_m_ = float(model_segs.loc[used, "distance_m"].sum())
+        self.model_, self.updated_ = self._update_model(model, design[used], model_segs[used])
         return self
+
+    def _segments(self, prepared: list, gnss_list: list, segment_steps: float) -> tuple[pd.DataFrame, np.ndarray]:
+        """Segments of ``segment_steps`` over all recordings, with each one's mean frequency, model step and design row."""
+        tables, designs = [], []
+        for r, ((st, x, pred), gn) in enumerate(zip(prepared, gnss_list)):
+            segs = gnss_segments(st, gn if gn is not None else _NO_GNSS,
+                                 **{**self._seg_args(), "segment_steps": segment_steps}).assign(rec_index=r)
+            freq = st["step_freq_hz"].to_numpy(float) if "step_freq_hz" in st.columns else np.full(len(st), np.nan)
+            spans = list(zip(segs["k_first"], segs["k_last"]))
+            segs["freq_hz"] = [float(np.nanmean(freq[a:b + 1])) if b >= a and np.isfinite(freq[a:b + 1]).any() else np.nan
+                               for a, b in spans]
+            segs["model_step_m"] = [float(pred[a:b + 1].mean()) if b >= a else np.nan for a, b in spans]
+            tables.append(segs)
+            designs.append(np.array([x[a:b + 1].mean(axis=0) for a, b in spans]).reshape(-1, x.shape[1]))
+        return pd.concat(tables, ignore_index=True), np.concatenate(designs)
+
+    def _set_noise(self, segs: pd.DataFrame) -> None:
+        segs["gnss_std_m"] = np.sqrt(2.0) * segs["h_acc_m"] / (segs["n_steps"] * segs["straightness"])
+        segs["measured_std_m"] = np.hypot(self.measurement_std_m, self.gnss_noise_scale_ * segs["gnss_std_m"])
 
     def _seg_args(self) -> dict:
         return dict(segment_steps=self.segment_steps, min_segment_steps=self.min_segment_steps, max_h_acc_m=self.max_h_acc_m,
@@ -210,7 +250,12 @@ class AdaptiveKalmanCalibration(Algorithm):
         z = segs["measured_step_m"].to_numpy(float)
         freq = segs["freq_hz"].to_numpy(float)
         several = p > 1 and np.isfinite(freq).sum() > 1 and float(np.nanstd(freq)) >= self.min_freq_spread_hz
-        cols = list(range(p)) if several or p == 1 else [0]
+        free = np.diag(prior) > 0  # a parameter with zero prior variance is known exactly: kept
+        cols = [i for i in (range(p) if several or p == 1 else [0]) if free[i]]
+        if not cols:
+            warnings.warn(f"calibration: the parameters to update ({self._names(model, several)}) have zero prior "
+                          "variance in the model's covariance; the model is unchanged", stacklevel=3)
+            return model.with_theta(theta0, prior), "none"
         fixed = [i for i in range(p) if i not in cols]
         resid = z - x @ theta0
         xf = x[:, cols]
@@ -220,11 +265,15 @@ class AdaptiveKalmanCalibration(Algorithm):
         theta = theta0.copy()
         theta[cols] += delta
         cov = prior.copy()
-        if fixed:  # A alone: its variance updated, its correlations with the kept parameters dropped
-            cov[0, :] = 0.0
-            cov[:, 0] = 0.0
+        if fixed:  # the updated ones' correlations with the kept parameters are dropped
+            cov[cols, :] = 0.0
+            cov[:, cols] = 0.0
         cov[np.ix_(cols, cols)] = post_cov
-        return model.with_theta(theta, cov), "all" if len(cols) == p else model.theta_names[0]
+        return model.with_theta(theta, cov), "all" if len(cols) == p else ", ".join(model.theta_names[i] for i in cols)
+
+    @staticmethod
+    def _names(model: StepLengthModel, several: bool) -> str:
+        return ", ".join(model.theta_names if several else model.theta_names[:1])
 
 
 _NO_GNSS = pd.DataFrame({"t_s": pd.Series(dtype=float), "e_m": pd.Series(dtype=float), "n_m": pd.Series(dtype=float)})
