@@ -78,7 +78,7 @@ class AdaptiveKalmanCalibration(Algorithm):
     def __init__(self, *, measurement_std_m: float = 0.05, process_std_init_m: float = 0.10,
                  process_std_min_m: float = 0.002, innovation_window: int = 3, segment_steps: float = 20.0,
                  min_segment_steps: float = 8.0, max_h_acc_m: float = 10.0, assumed_h_acc_m: float = 5.0,
-                 min_straightness: float = 0.9, min_step_m: float = 0.2, max_step_m: float = 1.6,
+                 min_straightness: float = 0.7, min_step_m: float = 0.2, max_step_m: float = 1.6,
                  min_freq_spread_hz: float = 0.1, outlier_h_acc_factor: float = 5.0, gnss_smoothing_s: float = 2.0,
                  adapt_gnss_noise: bool = True, model_segment_steps: float = 60.0):
         self.measurement_std_m = measurement_std_m
