@@ -44,7 +44,7 @@ def calibrate_recordings(recs: list[Path], out: Path, config_path=None) -> str:
         gnss_list.append(gnss.drop(columns="masked"))
         subjects.append(rec.subject)
     akf.fit(steps_list, gnss_list, model, subjects)
-    segs = akf.segments_
+    segs = akf.model_segments_
     if akf.updated_ == "none":
         reasons = segs.loc[~segs["used"], "reason"].value_counts().to_dict() if len(segs) else {}
         found = ", ".join(f"{n} {why}" for why, n in reasons.items()) or "no GNSS fix inside a walking bout"
