@@ -99,8 +99,9 @@ class SlipOpticalFlowStride(Algorithm):
     swing_ratio : eta, shank swing peak over its toe-off angle (eq. 3.16).
     swing_peak_fraction : where in the swing the shank angle peaks (thesis Appendix E: 1/4).
     swing_profile : "parabola" (thesis eq. 3.17) or "heel" (heel path and inverse kinematics; default).
-    swing_clearance_ratio : peak heel lift in swing over the stride length, for the "heel" profile (a per-user
-        body parameter, see ``calibrate``).
+    swing_clearance_ratio : c in the peak heel lift of the "heel" swing, c x stride x (stride / leg length)²
+        (a per-user body parameter, see :func:`calibrate_slip_body`; the cubic growth with the stride was read
+        off simulated walks of one user at three speeds: the best constant ratio grew as the stride squared).
     integral_weight : weight of the per-stride mean-flow difference (the image displacement of the stride,
         which fixes the stride length through f / D) relative to the sample-by-sample differences.
     strides_per_fit : strides fitted together (thesis: 2, assumed equal).
@@ -141,7 +142,7 @@ class SlipOpticalFlowStride(Algorithm):
 
     def __init__(self, *, thigh_length_m: float = 0.5, shank_length_m: float = 0.6, foot_length_m: float = 0.2,
                  mass_kg: float = 50.0, camera_from_knee_m: float = 0.28, focal_px: float = 1340.0,
-                 swing_ratio: float = 1.2, swing_peak_fraction: float = 0.25, swing_profile: str = "heel", swing_clearance_ratio: float = 0.05,
+                 swing_ratio: float = 1.2, swing_peak_fraction: float = 0.25, swing_profile: str = "heel", swing_clearance_ratio: float = 0.025,
                  integral_weight: float = 10.0,
                  strides_per_fit: int = 2,
                  length_from: str = "flow", n_refine: int = 2, max_evals: int = 60, duration_weight: float = 0.0, length_scale: float = 1.0,
@@ -181,10 +182,14 @@ class SlipOpticalFlowStride(Algorithm):
         kin = stride_kinematics(step, self.body, self.camera_from_knee_m, stance_fraction=stance_fraction,
                                 swing_ratio=self.swing_ratio, swing_peak_fraction=self.swing_peak_fraction,
                                 swing_profile=self.swing_profile,
-                                swing_clearance_m=self.swing_clearance_ratio * 2.0 * step.length_m, dt_s=dt_s)
+                                swing_clearance_m=self._clearance_m(2.0 * step.length_m), dt_s=dt_s)
         if kin.heel_m[:, 1].min() < -0.1 or not np.isfinite(kin.distance_m).all():
             return None  # the swing foot goes through the floor, or the camera looks above the horizon
         return kin.t_s, simulate_flow(kin, self.focal_px), kin.length_m, kin.duration_s
+
+    def _clearance_m(self, stride_m: float) -> float:
+        """Peak heel lift of the swing: ratio x stride x (stride / leg length)² (grows with the cube of the stride)."""
+        return self.swing_clearance_ratio * stride_m * (stride_m / self.body.leg_length_m) ** 2
 
     def _residuals(self, sim, windows) -> np.ndarray | None:
         """Quality-weighted differences, the simulated stride warped onto each measured stride, and per stride
@@ -367,7 +372,7 @@ class SlipOpticalFlowStride(Algorithm):
 
 
 def calibrate_slip_body(estimator: SlipOpticalFlowStride, t_s, forward_flow_pxps, quality, *, true_length_m: float,
-                        clearance_grid: tuple[float, ...] = (0.03, 0.04, 0.05, 0.06, 0.07)) -> SlipOpticalFlowStride:
+                        clearance_grid: tuple[float, ...] = (0.015, 0.02, 0.025, 0.03, 0.035)) -> SlipOpticalFlowStride:
     """Per-user body calibration on one walk of known mean stride length; returns a calibrated copy.
 
     The swing heel clearance ratio is chosen from ``clearance_grid`` (the one whose mean fitted stride is closest
