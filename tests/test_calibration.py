@@ -189,7 +189,7 @@ def test_cli_calibrate_a_simulated_walk_then_run_with_the_model(tmp_path, capsys
     assert "calibrated regression model on 1 recording(s)" in capsys.readouterr().out
     model = load_model(model_path)
     assert model.get_params() != RegressionStepLength.population().get_params()
-    assert main(["run", str(rec), "-o", str(tmp_path / "out"), "--model", str(model_path)]) == 0
+    assert main(["run", str(rec), "-o", str(tmp_path / "out"), "--model", str(model_path), "--no-gnss"]) == 0
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert summary["step_model"]["params"]["a_m"] == pytest.approx(model.a_m)
     truth = load_recording(rec).reference["summary"]["distance_m"]
