@@ -53,13 +53,15 @@ def test_run_writes_every_output(tmp_path, capsys):
     traj = pd.read_csv(out / "trajectory.csv")
     assert list(traj.columns) == ["t_s", "e_m", "n_m", "heading_rad", "e_std_m", "n_std_m", "lat_deg", "lon_deg"]
     assert len(traj) == len(steps) + 1 and len(steps) > 5
-    assert (traj[["e_m", "n_m"]].iloc[0] == 0).all() and np.all(np.diff(traj["t_s"]) > 0)
+    assert traj["t_s"].iloc[0] < steps["t_s"].iloc[0] and np.all(np.diff(traj["t_s"]) > 0)  # first row: the start
+    np.testing.assert_allclose(traj["t_s"].iloc[1:], steps["t_s"])
     summary = json.loads((out / "summary.json").read_text())
     for key in ("distance_m", "n_steps", "duration_s", "step_model", "solver", "timings_s", "warnings", "one_line"):
         assert key in summary
     assert summary["n_steps"] == len(steps)
     assert summary["distance_m"] == pytest.approx(np.sum(np.hypot(np.diff(traj["e_m"]), np.diff(traj["n_m"]))), rel=1e-6)
-    assert summary["gnss"]["valid"] == 20
+    assert summary["gnss"]["valid"] == 20 and summary["gnss"]["used"] > 10
+    assert summary["solver"]["fusion"] == "graph" and summary["solver"]["iterations"] > 0
     prov = json.loads((out / "run.json").read_text())
     assert prov["pdr_version"] and set(prov["inputs"]) == {"meta.toml", "imu.csv", "gnss.csv"}
     assert all(len(h) == 64 for h in prov["inputs"].values())
@@ -83,6 +85,7 @@ def test_no_gnss_and_mask_intervals(tmp_path, capsys):
     assert _run(capsys, str(rec), "-o", str(tmp_path / "b"), "--config", str(cfg), "--plot")[0] == 0
     summary = json.loads((tmp_path / "b" / "summary.json").read_text())
     assert summary["gnss"]["masked"] == 5 + 5  # t = 5..9 and 15..19
+    assert 0 < summary["gnss"]["used"] <= 20 - 10  # masked fixes are never used
     prov = json.loads((tmp_path / "b" / "run.json").read_text())
     assert prov["config"]["gnss"]["mask_intervals_s"] == [[5.0, 9.5], [15.0, 30.0]] and len(prov["config_file_sha256"]) == 64
 
@@ -137,7 +140,16 @@ def _bad_config(tmp_path: Path) -> tuple[Path, str]:
     return _recording(tmp_path, gnss=True), str(cfg)
 
 
-@pytest.mark.parametrize("case", ["missing", "unsorted", "bad_config", "missing_model", "gnss_typo"])
+def test_fusion_method_from_config(tmp_path, capsys):
+    rec = _recording(tmp_path)
+    cfg = tmp_path / "ekf.toml"
+    cfg.write_text('[fusion]\nmethod = "ekf"\n')
+    code, stdout, _ = _run(capsys, str(rec), "-o", str(tmp_path / "out"), "--config", str(cfg))
+    assert code == 0 and "ekf fusion" in stdout
+    assert json.loads((tmp_path / "out" / "run.json").read_text())["config"]["fusion"]["method"] == "ekf"
+
+
+@pytest.mark.parametrize("case", ["missing", "unsorted", "bad_config", "missing_model", "gnss_typo", "fusion_method"])
 def test_bad_input_exit_1_one_line_no_output(tmp_path, capsys, case):
     extra: list[str] = []
     if case == "missing":
@@ -151,6 +163,10 @@ def test_bad_input_exit_1_one_line_no_output(tmp_path, capsys, case):
         rec = _recording(tmp_path)
         (tmp_path / "typo.toml").write_text("[gnss]\nmask_interval_s = []\n")
         extra = ["--config", str(tmp_path / "typo.toml")]
+    elif case == "fusion_method":
+        rec = _recording(tmp_path)
+        (tmp_path / "f.toml").write_text('[fusion]\nmethod = "kalman"\n')
+        extra = ["--config", str(tmp_path / "f.toml")]
     else:
         rec = _recording(tmp_path)
         extra = ["--model", str(tmp_path / "no_model.json")]

@@ -1,12 +1,10 @@
 """``pdr run REC -o OUT``: the full reconstruction of one recording, and every output of CONTRACT.md.
 
 Stages (each timed in ``summary.json``): load (never ``reference/``) -> steps (``[steps]``, ``[heading]``) -> step lengths
-(``--model`` or ``[step_length]``) -> strides (foot IMUs ``[foot]``, leg camera ``[flow]``/``[slip]``; written, not yet fused)
--> GNSS in the local frame (``--no-gnss``, ``[gnss] mask_intervals_s``) -> trajectory
--> outputs, written in a temporary folder renamed onto OUT at the end (no half-written output, ever).
-
-The trajectory stage is, for now, a plain dead reckoning of the steps along their heading (:func:`dead_reckon`), with a
-first-order covariance propagation for ``e_std_m`` / ``n_std_m``; GNSS fixes are converted, masked and plotted but not fused.
+(``--model`` or ``[step_length]``) -> strides (foot IMUs ``[foot]``, leg camera ``[flow]``/``[slip]``) -> GNSS in the local
+frame (``--no-gnss``, ``[gnss] mask_intervals_s``) -> fusion (``[fusion] method = "graph" | "incremental" | "ekf"`` plus
+that class's parameters; default the batch factor graph) -> outputs, written in a temporary folder renamed onto OUT at
+the end (no half-written output, ever).
 """
 
 from __future__ import annotations
@@ -23,6 +21,7 @@ import pandas as pd
 from pdr import __version__
 from pdr.config import load_config
 from pdr.errors import InputError
+from pdr.fusion import EkfFusion, FactorGraphFusion, IncrementalFusion
 from pdr.geo import latlon_to_en
 from pdr.heading import AttitudeStepHeading
 from pdr.io.atomic import atomic_dir
@@ -43,9 +42,8 @@ from pdr.report import (
 from pdr.step_length import load_model, model_from_config
 
 STEP_SOURCE = "accelerometer"
-GNSS_KEYS = ("mask_intervals_s", "default_h_acc_m")
-DEFAULT_H_ACC_M = 5.0  # 1-sigma accuracy given to fixes without h_acc_m (a consumer receiver in the open)
-DR_HEADING_CHANGE_STD_RAD = 0.02  # per-step heading noise of the dead reckoning where the steps table gives none
+GNSS_KEYS = ("mask_intervals_s",)
+FUSION_METHODS = {"graph": FactorGraphFusion, "incremental": IncrementalFusion, "ekf": EkfFusion}
 HASH_CHUNK_BYTES = 1 << 20
 
 
@@ -56,7 +54,8 @@ HASH_CHUNK_BYTES = 1 << 20
 
 def gnss_settings(config: dict[str, Any]) -> dict[str, Any]:
     """The ``[gnss]`` section, checked: ``mask_intervals_s = [[t0, t1], ...]`` (fixes inside are ignored, to make
-    GNSS-denied runs from recordings that have GNSS) and ``default_h_acc_m`` (accuracy of fixes without ``h_acc_m``)."""
+    GNSS-denied runs from recordings that have GNSS). The accuracy given to fixes without ``h_acc_m`` is the fusion's
+    ``default_h_acc_m`` (``[fusion]``)."""
     section = dict(config.get("gnss", {}))
     unknown = sorted(set(section) - set(GNSS_KEYS))
     if unknown:
@@ -68,10 +67,7 @@ def gnss_settings(config: dict[str, Any]) -> dict[str, Any]:
     if not ok:
         raise InputError(f"configuration [gnss] mask_intervals_s: expected a list of [t_start_s, t_end_s] pairs with start <= end, "
                          f"found {intervals!r}")
-    h_acc = section.get("default_h_acc_m", DEFAULT_H_ACC_M)
-    if isinstance(h_acc, bool) or not isinstance(h_acc, (int, float)) or not h_acc > 0:
-        raise InputError(f"configuration [gnss] default_h_acc_m: expected a number > 0 (metres), found {h_acc!r}")
-    return {"mask_intervals_s": [[float(a), float(b)] for a, b in intervals], "default_h_acc_m": float(h_acc)}
+    return {"mask_intervals_s": [[float(a), float(b)] for a, b in intervals]}
 
 
 def gnss_local(rec: Recording, settings: dict[str, Any]) -> pd.DataFrame | None:
@@ -88,7 +84,6 @@ def gnss_local(rec: Recording, settings: dict[str, Any]) -> pd.DataFrame | None:
     else:
         e, n = latlon_to_en(g["lat_deg"].to_numpy(float), g["lon_deg"].to_numpy(float), rec.geo_origin)
     h_acc = g["h_acc_m"].to_numpy(float) if "h_acc_m" in g.columns else np.full(len(g), np.nan)
-    h_acc = np.where(np.isfinite(h_acc), h_acc, settings["default_h_acc_m"])
     t = g["t_s"].to_numpy(float)
     masked = np.zeros(len(g), bool)
     for t0, t1 in settings["mask_intervals_s"]:
@@ -96,54 +91,28 @@ def gnss_local(rec: Recording, settings: dict[str, Any]) -> pd.DataFrame | None:
     return pd.DataFrame({"t_s": t, "e_m": e, "n_m": n, "h_acc_m": h_acc, "masked": masked})
 
 
-def dead_reckon(steps: pd.DataFrame, *, t_start_s: float,
-                heading_change_std_rad: float = DR_HEADING_CHANGE_STD_RAD) -> tuple[pd.DataFrame, dict[str, Any]]:
-    """Plain dead reckoning: each step moves ``step_length_m`` along its ``heading_rad`` from the origin.
+def make_fusion(section: dict[str, Any] | None):
+    """The ``[fusion]`` section: ``method = "graph" | "incremental" | "ekf"`` (default graph: batch smoothing) plus
+    that fusion's parameters."""
+    section = dict(section or {})
+    method = section.pop("method", "graph")
+    if method not in FUSION_METHODS:
+        raise InputError(f"configuration [fusion]: expected method one of {', '.join(FUSION_METHODS)}, found {method!r}")
+    return method, FUSION_METHODS[method].from_config(section)
 
-    Returns the trajectory (``t_s, e_m, n_m, heading_rad, e_std_m, n_std_m``; first row = the start at ``t_start_s``,
-    then one row per step) and a solver dict.
 
-    Notes
-    -----
-    Uncertainty by first-order (EKF-style) propagation of the state (e, n, heading): ``P <- F P F^T + G Q G^T`` with
-    ``F = [[1, 0, -L sin h], [0, 1, L cos h], [0, 0, 1]]``, ``G = [[cos h, 0], [sin h, 0], [0, 1]]`` and
-    ``Q = diag(step_length_std_m^2, heading_change_std_rad^2)``; the start pose is known exactly (it defines the frame).
-    The per-step heading noise is the steps table's ``heading_change_std_rad`` where finite, else the default.
-    """
-    t0 = time.perf_counter()
-    n_steps = len(steps)
-    length = steps["step_length_m"].to_numpy(float)
-    length_std = steps["step_length_std_m"].to_numpy(float)
-    heading = steps["heading_rad"].to_numpy(float)
-    if "heading_change_std_rad" in steps.columns:
-        dh_std = steps["heading_change_std_rad"].to_numpy(float)
-        dh_std = np.where(np.isfinite(dh_std), dh_std, heading_change_std_rad)
-    else:
-        dh_std = np.full(n_steps, heading_change_std_rad)
-    bad = ~(np.isfinite(length) & np.isfinite(heading))
-    if bad.any():
-        raise InputError(f"steps: expected finite step_length_m and heading_rad, found {int(bad.sum())} non-finite value(s)")
-    e = np.concatenate([[0.0], np.cumsum(length * np.cos(heading))])
-    n = np.concatenate([[0.0], np.cumsum(length * np.sin(heading))])
-    e_std = np.zeros(n_steps + 1)
-    n_std = np.zeros(n_steps + 1)
-    p = np.zeros((3, 3))
-    for k in range(n_steps):
-        c, s = np.cos(heading[k]), np.sin(heading[k])
-        f = np.array([[1.0, 0.0, -length[k] * s], [0.0, 1.0, length[k] * c], [0.0, 0.0, 1.0]])
-        g = np.array([[c, 0.0], [s, 0.0], [0.0, 1.0]])
-        q = np.diag([np.nan_to_num(length_std[k]) ** 2, dh_std[k] ** 2])
-        p = f @ p @ f.T + g @ q @ g.T
-        e_std[k + 1], n_std[k + 1] = np.sqrt(p[0, 0]), np.sqrt(p[1, 1])
-    traj = pd.DataFrame({
-        "t_s": np.concatenate([[t_start_s], steps["t_s"].to_numpy(float)]),
-        "e_m": e, "n_m": n,
-        "heading_rad": np.concatenate([[heading[0] if n_steps else 0.0], heading]),
-        "e_std_m": e_std, "n_std_m": n_std,
-    })
-    solver = {"method": "dead_reckoning", "iterations": 0, "final_error": 0.0, "time_s": time.perf_counter() - t0,
-              "heading_change_std_rad": heading_change_std_rad}
-    return traj, solver
+def fusion_gnss(gnss: pd.DataFrame | None) -> pd.DataFrame | None:
+    """The fixes as the fusion takes them (``t_s, e_m, n_m, h_acc_m``): masked fixes become invalid (NaN) rows."""
+    if gnss is None:
+        return None
+    masked = gnss["masked"].to_numpy(bool)
+    return pd.DataFrame({"t_s": gnss["t_s"], "e_m": np.where(masked, np.nan, gnss["e_m"]),
+                         "n_m": np.where(masked, np.nan, gnss["n_m"]), "h_acc_m": gnss["h_acc_m"]})
+
+
+def start_only_trajectory(t_s: float) -> pd.DataFrame:
+    """The trajectory of a recording without steps: the start pose at the origin, heading 0, known exactly."""
+    return pd.DataFrame({"t_s": [t_s], "e_m": [0.0], "n_m": [0.0], "heading_rad": [0.0], "e_std_m": [0.0], "n_std_m": [0.0]})
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -204,6 +173,7 @@ def run_recording(rec: Path, out: Path, *, config_path=None, model_path=None, us
         recording = load_recording(rec, with_reference=False)
         config = load_config(config_path)
         settings = gnss_settings(config)
+        method, fusion = make_fusion(config.get("fusion"))
         model = load_model(model_path) if model_path is not None else model_from_config(config)
         lap("load_s")
 
@@ -222,14 +192,18 @@ def run_recording(rec: Path, out: Path, *, config_path=None, model_path=None, us
         gnss = gnss_local(recording, settings) if use_gnss else None
         lap("gnss_s")
 
-        t_start = float(recording.imu["t_s"].iloc[0])
-        traj, solver = dead_reckon(steps, t_start_s=t_start)
-        gnss_used = np.zeros(len(gnss), bool) if gnss is not None else None
-        lap("trajectory_s")
+        fusion.fuse(steps, gnss=fusion_gnss(gnss), strides=strides, step_model=model)
+        traj = fusion.trajectory_.reset_index(drop=True)
+        if len(steps):
+            steps["step_length_m"] = np.asarray(fusion.step_length_m_, float)
+            model = fusion.step_model_ if fusion.step_model_ is not None else model
+        else:
+            traj = start_only_trajectory(float(recording.imu["t_s"].iloc[0]))
+        gnss_used = np.asarray(fusion.gnss_used_, bool) if gnss is not None else None
+        solver = {"fusion": method, **fusion.solver_}
+        lap("fusion_s")
 
     run_warnings = [" ".join(str(w.message).split()) for w in caught]
-    if gnss is not None and len(gnss):
-        run_warnings.append("GNSS fixes are not fused yet: the trajectory is plain dead reckoning")
 
     steps.insert(0, "step_id", np.arange(len(steps), dtype=int))
     steps["source"] = STEP_SOURCE
@@ -256,7 +230,7 @@ def run_recording(rec: Path, out: Path, *, config_path=None, model_path=None, us
     }
     gnss_part = f"GNSS {gnss_counts['used']}/{gnss_counts['valid']} fixes used" if gnss_counts else "no GNSS"
     summary["one_line"] = (f"{recording.id}: {len(steps)} steps, {distance:.1f} m in {summary['duration_s']:.1f} s "
-                           f"({solver['method']}, {gnss_part}) -> {out}")
+                           f"({method} fusion, {gnss_part}) -> {out}")
     provenance = {
         "pdr_version": __version__,
         "recording": {"id": recording.id, "placement": recording.placement, "geo_origin": list(origin) if origin else None},
@@ -267,7 +241,7 @@ def run_recording(rec: Path, out: Path, *, config_path=None, model_path=None, us
         "config": {"input": config, "steps": make_detector(config.get("steps"), recording.placement).get_params(),
                    "heading": AttitudeStepHeading.from_config(config.get("heading")).get_params(),
                    "gnss": settings, "step_length": step_model,
-                   "trajectory": {k: v for k, v in solver.items() if k not in ("iterations", "final_error", "time_s")}},
+                   "fusion": {"method": method, "params": fusion.get_params()}},
     }
 
     with atomic_dir(out, force=True) as tmp:
@@ -284,7 +258,7 @@ def run_recording(rec: Path, out: Path, *, config_path=None, model_path=None, us
             if gnss is not None:
                 plot_gnss = gnss[["t_s", "e_m", "n_m", "masked"]].assign(used=gnss_used)
             write_plot(tmp / "trajectory.png", traj, gnss=plot_gnss,
-                       title=f"{recording.id}: {len(steps)} steps, {distance:.1f} m ({solver['method']})")
+                       title=f"{recording.id}: {len(steps)} steps, {distance:.1f} m ({method} fusion)")
         write_json(tmp / "run.json", provenance)
         lap("write_s")
         summary["timings_s"] = {**timings, "total_s": sum(timings.values())}
