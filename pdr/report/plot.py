@@ -32,13 +32,34 @@ def write_plot(path: Path, traj: pd.DataFrame, *, gnss: pd.DataFrame | None = No
     ax = fig.subplots()
     e, n = traj["e_m"].to_numpy(), traj["n_m"].to_numpy()
     e_std, n_std = traj["e_std_m"].to_numpy(), traj["n_std_m"].to_numpy()
+    # the view: the path and the GNSS fixes (not the ellipses: a weak start prior may be kilometres wide)
+    xs, ys = [e], [n]
+    if gnss is not None and len(gnss):
+        xs.append(gnss["e_m"].to_numpy(float))
+        ys.append(gnss["n_m"].to_numpy(float))
+    x_all, y_all = np.concatenate(xs), np.concatenate(ys)
+    ok_xy = np.isfinite(x_all) & np.isfinite(y_all)
+    if ok_xy.any():
+        x_all, y_all = x_all[ok_xy], y_all[ok_xy]
+        span = max(float(np.ptp(x_all)), float(np.ptp(y_all)), 1.0)
+        margin = 0.08 * span
+        xlim = (float(x_all.min()) - margin, float(x_all.max()) + margin)
+        ylim = (float(y_all.min()) - margin, float(y_all.max()) + margin)
+    else:
+        span, xlim, ylim = 1.0, (-1.0, 1.0), (-1.0, 1.0)
     idx = np.unique(np.linspace(0, len(traj) - 1, min(len(traj), MAX_ELLIPSES)).round().astype(int)) if len(traj) else []
-    first = True
+    drawn, too_wide = [], 0
     for i in idx:
-        if np.isfinite(e_std[i]) and np.isfinite(n_std[i]) and (e_std[i] > 0 or n_std[i] > 0):
-            ax.add_patch(Ellipse((e[i], n[i]), 2 * SIGMA_SCALE * e_std[i], 2 * SIGMA_SCALE * n_std[i], facecolor="tab:blue",
-                                 alpha=0.12, edgecolor="none", label="1-sigma uncertainty" if first else None))
-            first = False
+        if not (np.isfinite(e_std[i]) and np.isfinite(n_std[i]) and (e_std[i] > 0 or n_std[i] > 0)):
+            continue
+        if SIGMA_SCALE * max(e_std[i], n_std[i]) > span:
+            too_wide += 1
+            continue
+        drawn.append(i)
+    label = "1-sigma uncertainty" + (f" ({too_wide} wider than the view not drawn)" if too_wide else "")
+    for k, i in enumerate(drawn):
+        ax.add_patch(Ellipse((e[i], n[i]), 2 * SIGMA_SCALE * e_std[i], 2 * SIGMA_SCALE * n_std[i], facecolor="tab:blue",
+                             alpha=0.12, edgecolor="none", label=label if k == 0 else None))
     if gnss is not None and len(gnss):
         ok = np.isfinite(gnss["e_m"].to_numpy()) & np.isfinite(gnss["n_m"].to_numpy())
         masked = gnss["masked"].to_numpy(bool) & ok if "masked" in gnss.columns else np.zeros(len(gnss), bool)
@@ -54,6 +75,8 @@ def write_plot(path: Path, traj: pd.DataFrame, *, gnss: pd.DataFrame | None = No
         ax.plot(e[-1:], n[-1:], "s", color="black", label="end")
     ax.set_xlabel("east (m)")
     ax.set_ylabel("north (m)")
+    ax.set_xlim(*xlim)
+    ax.set_ylim(*ylim)
     ax.set_aspect("equal", adjustable="datalim")
     ax.grid(True, lw=0.3)
     ax.set_title(title, fontsize=10)
