@@ -34,6 +34,8 @@ class Problem:
     epoch_t_s: np.ndarray  # (N + 1,)
     step_length_m: np.ndarray  # (N,) from the steps table
     step_length_std_m: np.ndarray  # (N,)
+    lateral_std_m: np.ndarray  # (N,) across the step
+    gap: np.ndarray  # (N,) bool: the step spans a gap (missed steps, a stop): its length is barely known
     dtheta_rad: np.ndarray  # (N,) heading change of step i (epoch i -> i + 1)
     dtheta_std_rad: np.ndarray  # (N,)
     heading0_rad: float  # heading of the start pose (documented default: the first step's heading_rad)
@@ -86,8 +88,13 @@ def empty_trajectory() -> pd.DataFrame:
 
 def prepare(steps: pd.DataFrame, gnss: pd.DataFrame | None, strides: pd.DataFrame | None, *, t_start_s: float | None,
             default_step_length_std_m: float, default_heading_change_std_rad: float, default_h_acc_m: float,
-            gnss_time_tolerance_s: float) -> Problem | None:
-    """Check the tables and build the :class:`Problem`; ``None`` (with a warning) for a table of 0 steps."""
+            gnss_time_tolerance_s: float, lateral_std_m: float, max_step_duration_s: float,
+            gap_speed_std_mps: float) -> Problem | None:
+    """Check the tables and build the :class:`Problem`; ``None`` (with a warning) for a table of 0 steps.
+
+    A step lasting more than ``max_step_duration_s`` (steps missed by the detector, a stop, the start after standing)
+    is a *gap*: the displacement over it is known only to ``gap_speed_std_mps`` times its duration, along and across,
+    so that GNSS, not the step model, says where the walker went."""
     _require(steps, STEP_COLUMNS, "steps")
     if "heading_change_rad" not in steps.columns and "heading_rad" not in steps.columns:
         raise InputError("steps: expected a heading_change_rad or heading_rad column, found neither")
@@ -141,21 +148,28 @@ def prepare(steps: pd.DataFrame, gnss: pd.DataFrame | None, strides: pd.DataFram
     mag_std = _column_or(steps, "mag_heading_std_rad", "steps", np.nan)
     mag = np.where(np.isfinite(mag_std) & (mag_std > 0), mag, np.nan)
 
-    problem = Problem(epoch_t_s=np.concatenate([[t_start_s], t]), step_length_m=length, step_length_std_m=length_std,
+    epochs = np.concatenate([[t_start_s], t])
+    gap = np.diff(epochs) > max_step_duration_s
+    gap_std = gap_speed_std_mps * np.diff(epochs)
+    length_std = np.where(gap, np.maximum(length_std, gap_std), length_std)
+    lateral = np.where(gap, gap_std, lateral_std_m)
+    problem = Problem(epoch_t_s=epochs, step_length_m=length, step_length_std_m=length_std, lateral_std_m=lateral, gap=gap,
                       dtheta_rad=dtheta, dtheta_std_rad=dtheta_std, heading0_rad=heading0, features=features,
                       mag_rad=mag, mag_std_rad=mag_std)
     if gnss is not None:
-        _add_gnss(problem, gnss, default_h_acc_m, gnss_time_tolerance_s)
+        _add_gnss(problem, gnss, default_h_acc_m, gnss_time_tolerance_s, gap_speed_std_mps)
     if strides is not None:
         _add_strides(problem, strides)
     return problem
 
 
-def _add_gnss(problem: Problem, gnss: pd.DataFrame, default_h_acc_m: float, tolerance_s: float) -> None:
+def _add_gnss(problem: Problem, gnss: pd.DataFrame, default_h_acc_m: float, tolerance_s: float,
+              gap_speed_std_mps: float) -> None:
     """Valid fixes -> (epoch k, fraction alpha). Documented defaults: rows with NaN position, NaN time, h_acc_m <= 0
     or ``masked`` are not used; a fix up to ``tolerance_s`` outside the walk is tied to the first / last pose, one
     further out is not used (warning); an exact duplicate row is used once (warning); two different fixes at the
-    same time are an InputError."""
+    same time are an InputError. A fix inside a gap step gets ``gap_speed_std_mps`` times its time to the nearest
+    epoch added (in quadrature) to its accuracy: the path inside a gap is not the straight line between its ends."""
     _require(gnss, GNSS_COLUMNS, "gnss")
     problem.gnss_n_rows = len(gnss)
     if len(gnss) == 0:
@@ -195,8 +209,12 @@ def _add_gnss(problem: Problem, gnss: pd.DataFrame, default_h_acc_m: float, tole
     tc = np.clip(t[idx], tau[0], tau[-1])
     k = np.clip(np.searchsorted(tau, tc, side="right") - 1, 0, max(len(tau) - 2, 0))
     alpha = np.clip((tc - tau[k]) / (tau[k + 1] - tau[k]), 0.0, 1.0) if len(tau) > 1 else np.zeros(len(idx))
+    std = h_acc[idx]
+    if len(tau) > 1:
+        away = np.minimum(tc - tau[k], tau[k + 1] - tc)
+        std = np.where(problem.gap[k], np.hypot(std, gap_speed_std_mps * away), std)
     problem.gnss_row, problem.gnss_t_s, problem.gnss_en_m = idx, t[idx], en[idx]
-    problem.gnss_std_m, problem.gnss_k, problem.gnss_alpha = h_acc[idx], k, alpha
+    problem.gnss_std_m, problem.gnss_k, problem.gnss_alpha = std, k, alpha
 
 
 def _add_strides(problem: Problem, strides: pd.DataFrame) -> None:

@@ -1,7 +1,7 @@
 """Closed-form (linear least-squares) updates of the parameters that enter the step factors linearly.
 
-The step length ``A + B f + C v`` and a heading-rate bias ``b(t)`` (gyro) or heading offset ``beta(t)`` (magnetometer)
-enter the per-step measurements linearly. Given the poses, each is a small weighted least-squares problem with a
+The step length ``A + B f + C v``, a heading-rate bias ``b(t)`` (gyro) and the deviation of the magnetometer heading
+(a function of heading) enter the per-step measurements linearly. Given the poses, each is a small weighted least-squares problem with a
 Gaussian prior; :class:`~pdr.fusion.graph.FactorGraphFusion` alternates these with the pose solve (block coordinate
 descent on the joint objective), which keeps every per-step factor a built-in one.
 """
@@ -42,6 +42,21 @@ def solve_step_model(distance_m: np.ndarray, features: np.ndarray, std_m: np.nda
     rhs = features.T @ (w * distance_m) + p0_inv @ prior.theta
     cov = np.linalg.inv(info)
     return cov @ rhs, cov
+
+
+def deviation_design(heading_rad: np.ndarray) -> np.ndarray:
+    """Compass deviation as a function of heading: ``[1, cos h, sin h, cos 2h, sin 2h]`` (a constant offset,
+    hard iron -> first harmonic, soft iron -> second harmonic; the classic deviation curve of a compass)."""
+    h = np.asarray(heading_rad, float)
+    return np.column_stack([np.ones(len(h)), np.cos(h), np.sin(h), np.cos(2 * h), np.sin(2 * h)])
+
+
+def solve_deviation(y_rad: np.ndarray, heading_rad: np.ndarray, std_rad: np.ndarray, prior_std_rad: float) -> np.ndarray:
+    """MAP deviation coefficients for ``y = deviation_design(heading) . c + e``, zero-mean prior ``prior_std_rad``."""
+    a = deviation_design(heading_rad)
+    w = 1.0 / np.square(std_rad)
+    info = a.T @ (a * w[:, None]) + np.eye(a.shape[1]) / prior_std_rad ** 2
+    return np.linalg.solve(info, a.T @ (w * y_rad))
 
 
 @dataclass

@@ -23,7 +23,8 @@ class EkfFusion(Algorithm):
 
     Parameters
     ----------
-    default_step_length_std_m, default_heading_change_std_rad, lateral_std_m, default_h_acc_m, gnss_time_tolerance_s
+    default_step_length_std_m, default_heading_change_std_rad, lateral_std_m, default_h_acc_m, gnss_time_tolerance_s,
+    max_step_duration_s, gap_speed_std_mps
         As :class:`~pdr.fusion.FactorGraphFusion`.
     gnss_gate_chi2, mag_gate_chi2
         Innovation gates (2-dof and 1-dof chi-square, 99.9%).
@@ -57,7 +58,8 @@ class EkfFusion(Algorithm):
                  lateral_std_m: float = 0.02, default_h_acc_m: float = 5.0, gnss_time_tolerance_s: float = 1.0,
                  gnss_gate_chi2: float = CHI2_2DOF_999, mag_gate_chi2: float = CHI2_1DOF_999,
                  initial_heading_std_rad: float = 0.5, scale_prior_std: float = 0.1, scale_rw_per_sqrt_step: float = 1e-3,
-                 gyro_bias_prior_std_radps: float = 0.01, gyro_bias_rw_radps_per_sqrt_s: float = 1e-5):
+                 gyro_bias_prior_std_radps: float = 0.01, gyro_bias_rw_radps_per_sqrt_s: float = 1e-5,
+                 max_step_duration_s: float = 2.0, gap_speed_std_mps: float = 1.0):
         self.default_step_length_std_m = default_step_length_std_m
         self.default_heading_change_std_rad = default_heading_change_std_rad
         self.lateral_std_m = lateral_std_m
@@ -70,6 +72,8 @@ class EkfFusion(Algorithm):
         self.scale_rw_per_sqrt_step = scale_rw_per_sqrt_step
         self.gyro_bias_prior_std_radps = gyro_bias_prior_std_radps
         self.gyro_bias_rw_radps_per_sqrt_s = gyro_bias_rw_radps_per_sqrt_s
+        self.max_step_duration_s = max_step_duration_s
+        self.gap_speed_std_mps = gap_speed_std_mps
 
     def fuse(self, steps: pd.DataFrame, *, gnss: pd.DataFrame | None = None, strides: pd.DataFrame | None = None,
              step_model=None, t_start_s: float | None = None) -> EkfFusion:
@@ -80,7 +84,9 @@ class EkfFusion(Algorithm):
                 raise InputError(f"EkfFusion {name}: expected a number > 0, found {value!r}")
         problem = prepare(steps, gnss, None, t_start_s=t_start_s, default_step_length_std_m=self.default_step_length_std_m,
                           default_heading_change_std_rad=self.default_heading_change_std_rad,
-                          default_h_acc_m=self.default_h_acc_m, gnss_time_tolerance_s=self.gnss_time_tolerance_s)
+                          default_h_acc_m=self.default_h_acc_m, gnss_time_tolerance_s=self.gnss_time_tolerance_s,
+                          lateral_std_m=self.lateral_std_m, max_step_duration_s=self.max_step_duration_s,
+                          gap_speed_std_mps=self.gap_speed_std_mps)
         n_rows = 0 if gnss is None else len(gnss)
         if problem is None:
             self.trajectory_, self.step_model_, self.step_length_m_ = empty_trajectory(), step_model, np.zeros(0)
@@ -117,7 +123,7 @@ class EkfFusion(Algorithm):
             f[0, 2], f[0, 3], f[0, 4] = -sl * s, length * c, sl * s * dt[i]
             f[1, 2], f[1, 3], f[1, 4] = sl * c, length * s, -sl * c * dt[i]
             g = np.array([[x[3] * c, -sl * s, -s], [x[3] * s, sl * c, c], [0.0, 1.0, 0.0], [0, 0, 0], [0, 0, 0]])
-            q = g @ np.diag([l_std ** 2, dth_std ** 2, self.lateral_std_m ** 2]) @ g.T
+            q = g @ np.diag([l_std ** 2, dth_std ** 2, problem.lateral_std_m[i] ** 2]) @ g.T
             if p[3, 3] > 0:
                 q[3, 3] = self.scale_rw_per_sqrt_step ** 2
             if p[4, 4] > 0:

@@ -14,7 +14,15 @@ from pdr.base import Algorithm
 from pdr.errors import InputError
 from pdr.fusion import factors
 from pdr.fusion._inputs import BOUT_START_HEADING_STD_RAD, Problem, empty_trajectory, prepare, wrap_rad
-from pdr.fusion._linear import SmoothSeries, solve_series, solve_step_model, step_model_params, zero_series
+from pdr.fusion._linear import (
+    SmoothSeries,
+    deviation_design,
+    solve_deviation,
+    solve_series,
+    solve_step_model,
+    step_model_params,
+    zero_series,
+)
 from pdr.step_length import RegressionStepLength
 
 GNSS_FACTORS = ("shifted", "interpolated")
@@ -59,6 +67,19 @@ def align_to_fixes(poses: np.ndarray, problem: Problem) -> np.ndarray:
     out[:, :2] = poses[:, :2] @ rot.T + shift
     out[:, 2] = poses[:, 2] + np.arctan2(rot[1, 0], rot[0, 0])
     return out
+
+
+def gate(d2: np.ndarray, threshold: float, max_run: int) -> np.ndarray:
+    """Chi-square gate of the fixes (in time order), except that a run of more than ``max_run`` consecutive rejected
+    fixes is kept: outliers come alone, a long consistent run means the path, not the fixes, is wrong."""
+    use = d2 <= threshold
+    rejected = np.concatenate([[0], (~use).astype(np.int8), [0]])
+    starts = np.flatnonzero(np.diff(rejected) == 1)
+    ends = np.flatnonzero(np.diff(rejected) == -1)
+    for a, b in zip(starts, ends):
+        if b - a > max_run:
+            use[a:b] = True
+    return use
 
 
 def course_correction(poses: np.ndarray, problem: Problem, window_s: float = 30.0) -> tuple[np.ndarray, float] | None:
@@ -122,11 +143,17 @@ class FactorGraphFusion(Algorithm):
     gyro_bias_knot_s, gyro_bias_rw_radps_per_sqrt_s, gyro_bias_prior_std_radps
         Heading-rate bias of the relative heading changes: piecewise linear between knots this far apart, a random
         walk between knots, zero-mean prior.
-    mag_offset_knot_s, mag_offset_rw_rad_per_sqrt_s, mag_offset_prior_std_rad
-        The same for the slowly varying offset of the magnetometer heading.
+    mag_deviation_prior_std_rad
+        Prior of the coefficients of the magnetometer deviation curve (offset + first and second harmonic of the
+        heading: hard and soft iron), calibrated against GNSS and gyro while outdoors and used indoors.
     max_alternations, alternation_tol_m
         Outer iterations of (pose solve, closed-form parameter update) and the stop criterion: the largest change
         of the predicted step lengths and of the heading corrections (times the step length), in metres.
+    max_step_duration_s, gap_speed_std_mps
+        A step longer than this (missed steps, a stop) is a gap: its displacement is known only to
+        ``gap_speed_std_mps`` times its duration, and it is left out of the step-model calibration.
+    max_rejected_run
+        A run of more than this many consecutive fixes failing the gate is kept (the path is wrong, not the fixes).
     compute_covariance
         Marginal covariance of every pose (``e_std_m``, ``n_std_m``); False leaves them NaN and saves time.
 
@@ -139,8 +166,10 @@ class FactorGraphFusion(Algorithm):
         Per-step length after fusion (distance between consecutive poses along the step).
     gnss_used_ : ndarray of bool
         One per GNSS row: True if the fix was used and not rejected by the chi-square gate.
-    gyro_bias_radps_, mag_offset_rad_ : ndarray
-        The estimated heading-rate bias at each step and magnetometer offset at each step.
+    gyro_bias_radps_, mag_deviation_rad_ : ndarray
+        The estimated heading-rate bias and magnetometer deviation at each step.
+    mag_deviation_coef_ : ndarray
+        The deviation curve's coefficients (``[1, cos h, sin h, cos 2h, sin 2h]``), for an :class:`IncrementalFusion`.
     solver_ : dict
         ``method, iterations`` (LM, summed), ``alternations, final_error, time_s, marginals_time_s, gnss_used,
         gnss_rejected, converged``.
@@ -149,10 +178,10 @@ class FactorGraphFusion(Algorithm):
     -----
     Factors: ``BetweenFactorPose2`` per step (length ``A + B f + C v`` along the heading turned by the gyro heading
     change minus the bias), ``RangeFactorPose2`` per stride, robust ``PoseRotationPrior2D`` per magnetometer heading
-    (minus the offset), GNSS factors behind a Huber kernel plus a chi-square gate, a prior on the start pose (tight
+    (minus its deviation), GNSS factors behind a Huber kernel plus a chi-square gate, a prior on the start pose (tight
     at the origin and the first step's heading when nothing absolute is known, the documented default; very weak
     otherwise). Parameters that enter the step measurements linearly (step model after Ladetto et al. 2000,
-    ``length = A + B f + C v``; heading-rate bias; magnetometer offset) are solved in closed form given the poses,
+    ``length = A + B f + C v``; heading-rate bias; magnetometer deviation) are solved in closed form given the poses,
     alternating with the pose solve (block coordinate descent on the joint least-squares objective), so every
     per-step factor stays built-in (a shared (A, B, C) variable in 10,000 Python factors is not tractable, see
     DESIGN.md). Covariances: ``gtsam.Marginals`` of the final graph, rotated from the pose frame to east-north;
@@ -170,8 +199,8 @@ class FactorGraphFusion(Algorithm):
                  calibrate_step_model: bool = True, prior_a_std_m: float = 0.2, prior_b_std_m_per_hz: float = 0.1,
                  prior_c_std_m_per_m2ps4: float = 0.02, gyro_bias_knot_s: float = 60.0,
                  gyro_bias_rw_radps_per_sqrt_s: float = 1e-5, gyro_bias_prior_std_radps: float = 0.01,
-                 mag_offset_knot_s: float = 60.0, mag_offset_rw_rad_per_sqrt_s: float = 0.005,
-                 mag_offset_prior_std_rad: float = 0.3, max_alternations: int = 12, alternation_tol_m: float = 0.002,
+                 mag_deviation_prior_std_rad: float = 0.3, max_alternations: int = 12, alternation_tol_m: float = 0.002,
+                 max_step_duration_s: float = 2.0, gap_speed_std_mps: float = 1.0, max_rejected_run: int = 10,
                  compute_covariance: bool = True):
         self.default_step_length_std_m = default_step_length_std_m
         self.default_heading_change_std_rad = default_heading_change_std_rad
@@ -188,11 +217,12 @@ class FactorGraphFusion(Algorithm):
         self.gyro_bias_knot_s = gyro_bias_knot_s
         self.gyro_bias_rw_radps_per_sqrt_s = gyro_bias_rw_radps_per_sqrt_s
         self.gyro_bias_prior_std_radps = gyro_bias_prior_std_radps
-        self.mag_offset_knot_s = mag_offset_knot_s
-        self.mag_offset_rw_rad_per_sqrt_s = mag_offset_rw_rad_per_sqrt_s
-        self.mag_offset_prior_std_rad = mag_offset_prior_std_rad
+        self.mag_deviation_prior_std_rad = mag_deviation_prior_std_rad
         self.max_alternations = max_alternations
         self.alternation_tol_m = alternation_tol_m
+        self.max_step_duration_s = max_step_duration_s
+        self.gap_speed_std_mps = gap_speed_std_mps
+        self.max_rejected_run = max_rejected_run
         self.compute_covariance = compute_covariance
 
     # ------------------------------------------------------------------------------------------------------------
@@ -201,21 +231,24 @@ class FactorGraphFusion(Algorithm):
             raise InputError(f"gnss_factor: expected one of {', '.join(GNSS_FACTORS)}, found {self.gnss_factor!r}")
         positive = ["default_step_length_std_m", "default_heading_change_std_rad", "lateral_std_m", "default_h_acc_m",
                     "huber_k", "gnss_gate_chi2", "gyro_bias_knot_s", "gyro_bias_rw_radps_per_sqrt_s",
-                    "gyro_bias_prior_std_radps", "mag_offset_knot_s", "mag_offset_rw_rad_per_sqrt_s",
-                    "mag_offset_prior_std_rad", "alternation_tol_m", "prior_a_std_m", "prior_b_std_m_per_hz",
-                    "prior_c_std_m_per_m2ps4"]
+                    "gyro_bias_prior_std_radps", "mag_deviation_prior_std_rad", "alternation_tol_m", "prior_a_std_m", "prior_b_std_m_per_hz",
+                    "prior_c_std_m_per_m2ps4", "max_step_duration_s", "gap_speed_std_mps"]
         for name in positive:
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and np.isfinite(value) and value > 0):
                 raise InputError(f"{type(self).__name__} {name}: expected a number > 0, found {value!r}")
-        if not (isinstance(self.max_alternations, int) and self.max_alternations >= 1):
-            raise InputError(f"max_alternations: expected an integer >= 1, found {self.max_alternations!r}")
+        for name in ("max_alternations", "max_rejected_run"):
+            value = getattr(self, name)
+            if not (isinstance(value, int) and value >= 1):
+                raise InputError(f"{type(self).__name__} {name}: expected an integer >= 1, found {value!r}")
 
     def _prepare(self, steps, gnss, strides, t_start_s) -> Problem | None:
         return prepare(steps, gnss, strides, t_start_s=t_start_s,
                        default_step_length_std_m=self.default_step_length_std_m,
                        default_heading_change_std_rad=self.default_heading_change_std_rad,
-                       default_h_acc_m=self.default_h_acc_m, gnss_time_tolerance_s=self.gnss_time_tolerance_s)
+                       default_h_acc_m=self.default_h_acc_m, gnss_time_tolerance_s=self.gnss_time_tolerance_s,
+                       lateral_std_m=self.lateral_std_m, max_step_duration_s=self.max_step_duration_s,
+                       gap_speed_std_mps=self.gap_speed_std_mps)
 
     def _empty(self, gnss: pd.DataFrame | None, step_model) -> FactorGraphFusion:
         self.trajectory_ = empty_trajectory()
@@ -223,7 +256,8 @@ class FactorGraphFusion(Algorithm):
         self.step_length_m_ = np.zeros(0)
         self.gnss_used_ = np.zeros(0 if gnss is None else len(gnss), bool)
         self.gyro_bias_radps_ = np.zeros(0)
-        self.mag_offset_rad_ = np.zeros(0)
+        self.mag_deviation_rad_ = np.zeros(0)
+        self.mag_deviation_coef_ = np.zeros(deviation_design(np.zeros(1)).shape[1])
         self.solver_ = {"method": "levenberg_marquardt", "iterations": 0, "alternations": 0, "final_error": 0.0,
                         "time_s": 0.0, "marginals_time_s": 0.0, "gnss_used": 0, "gnss_rejected": 0, "converged": True}
         return self
@@ -242,7 +276,8 @@ class FactorGraphFusion(Algorithm):
         n_fix = len(problem.gnss_row)
         absolute = n_fix >= 1
         observable = n_fix >= 2 or len(problem.stride_length_m) > 0
-        feats_ok = (np.isfinite(problem.features).all(axis=1) if problem.features is not None else np.zeros(n, bool))
+        feats_ok = (np.isfinite(problem.features).all(axis=1) & ~problem.gap if problem.features is not None
+                    else np.zeros(n, bool))
         regression = step_model is None or isinstance(step_model, RegressionStepLength)
         calibrate = bool(self.calibrate_step_model and regression and observable and problem.features is not None
                          and feats_ok.sum() >= 3)
@@ -255,7 +290,7 @@ class FactorGraphFusion(Algorithm):
         has_mag = np.isfinite(problem.mag_rad)
         estimate_bias = n_fix >= 2 or bool(has_mag.any())
         bias = zero_series(problem.epoch_t_s, self.gyro_bias_knot_s)
-        offset = zero_series(problem.epoch_t_s, self.mag_offset_knot_s)
+        n_dev = deviation_design(np.zeros(1)).shape[1]
         nb = len(bias.values)
         dt = problem.step_duration_s
         known_turn = problem.dtheta_std_rad < BOUT_START_HEADING_STD_RAD
@@ -263,17 +298,17 @@ class FactorGraphFusion(Algorithm):
         t_step = problem.epoch_t_s[1:]
         model_cov = None
         theta0 = model_prior.theta if calibrate else np.zeros(3)
-        params = np.concatenate([theta0, bias.values, offset.values])
+        params = np.concatenate([theta0, bias.values, np.zeros(n_dev)])
         # each parameter in metres of effect on the path (convergence test and acceleration)
         mean_length = float(np.mean(problem.step_length_m)) if n else 1.0
         mean_speed = mean_length / float(np.median(dt)) if n else 1.0
         feat_scale = np.abs(np.nanmean(problem.features[feats_ok], axis=0)) if calibrate else np.ones(3)
         scale = np.concatenate([feat_scale, np.full(nb, 0.5 * self.gyro_bias_knot_s ** 2 * mean_speed),
-                                np.full(len(offset.values), 10.0 * mean_length)])
+                                np.full(n_dev, 10.0 * mean_length)])
 
-        def unpack(p: np.ndarray) -> tuple[np.ndarray, np.ndarray, SmoothSeries]:
+        def unpack(p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
             b = SmoothSeries(bias.t0_s, bias.knot_s, p[3:3 + nb])
-            o = SmoothSeries(offset.t0_s, offset.knot_s, p[3 + nb:])
+            o = p[3 + nb:]
             length = (np.where(feats_ok, np.nan_to_num(problem.features) @ p[:3], problem.step_length_m)
                       if calibrate else problem.step_length_m)
             return length, problem.dtheta_rad - b(t_step) * dt, o
@@ -289,14 +324,13 @@ class FactorGraphFusion(Algorithm):
                                                  self.gyro_bias_rw_radps_per_sqrt_s,
                                                  self.gyro_bias_prior_std_radps).values
             if has_mag.any():
-                y = wrap_rad(problem.mag_rad[has_mag] - poses[1:, 2][has_mag])
-                t_mag = t_step[has_mag]
-                current = SmoothSeries(offset.t0_s, offset.knot_s, p[3 + nb:])
-                inlier = np.abs(wrap_rad(y - current(t_mag))) <= 5.0 * problem.mag_std_rad[has_mag]
+                heading = poses[1:, 2][has_mag]
+                y = wrap_rad(problem.mag_rad[has_mag] - heading)
+                inlier = (np.abs(wrap_rad(y - deviation_design(heading) @ p[3 + nb:]))
+                          <= 5.0 * problem.mag_std_rad[has_mag])
                 if inlier.any():
-                    out[3 + nb:] = solve_series(offset, t_mag[inlier], y[inlier], np.ones(int(inlier.sum())),
-                                                problem.mag_std_rad[has_mag][inlier], self.mag_offset_rw_rad_per_sqrt_s,
-                                                self.mag_offset_prior_std_rad).values
+                    out[3 + nb:] = solve_deviation(y[inlier], heading[inlier], problem.mag_std_rad[has_mag][inlier],
+                                                   self.mag_deviation_prior_std_rad)
             if calibrate:
                 along = self._along_track(poses)
                 out[:3], cov = solve_step_model(along[feats_ok], problem.features[feats_ok],
@@ -316,20 +350,19 @@ class FactorGraphFusion(Algorithm):
             poses = align_to_fixes(poses, problem)
         use = np.ones(n_fix, bool)
         lm_iterations, final_error, converged, alternation = 0, 0.0, False, 0
-        graph = None
+        graph = values = None
         history_f: list[np.ndarray] = []
         history_g: list[np.ndarray] = []
         prev_f = prev_g = None
         for alternation in range(1, self.max_alternations + 1):
             length_now, dtheta_now, offset_now = unpack(params)
             graph = self._graph(problem, poses, length_now, dtheta_now, offset_now, use, absolute)
-            poses, iters, final_error = self._solve(graph, poses)
+            values, iters, final_error = self._solve(graph, values if values is not None else self._values(poses))
+            poses = gtsam.utilities.extractPose2(values)
             lm_iterations += iters
             pos = interpolate_positions(poses, problem.gnss_k, problem.gnss_alpha)
             d2 = np.sum(np.square(pos - problem.gnss_en_m), axis=1) / np.square(problem.gnss_std_m)
-            new_use = d2 <= self.gnss_gate_chi2
-            if n_fix and not new_use.any():
-                new_use = d2 <= np.median(d2)  # never reject every fix: keep the better half
+            new_use = gate(d2, self.gnss_gate_chi2, self.max_rejected_run)
             mapped, cov = update(poses, params)
             if cov is not None:
                 model_cov = cov
@@ -355,11 +388,10 @@ class FactorGraphFusion(Algorithm):
             use = new_use
         theta = params[:3]
         bias = SmoothSeries(bias.t0_s, bias.knot_s, params[3:3 + nb])
-        offset = SmoothSeries(offset.t0_s, offset.knot_s, params[3 + nb:])
         t_marg = time.perf_counter()
         pos_std = np.full((n + 1, 2), np.nan)
         if self.compute_covariance:
-            pos_std = self._marginal_std(graph, poses)
+            pos_std = self._marginal_std(graph, values, poses)
         t_end = time.perf_counter()
 
         self.trajectory_ = trajectory_frame(problem, poses, pos_std)
@@ -367,7 +399,8 @@ class FactorGraphFusion(Algorithm):
         self.gnss_used_ = np.zeros(problem.gnss_n_rows, bool)
         self.gnss_used_[problem.gnss_row] = use
         self.gyro_bias_radps_ = bias(problem.epoch_t_s[1:])
-        self.mag_offset_rad_ = offset(problem.epoch_t_s[1:])
+        self.mag_deviation_coef_ = params[3 + nb:].copy()
+        self.mag_deviation_rad_ = deviation_design(poses[1:, 2]) @ self.mag_deviation_coef_
         if calibrate:
             self.step_model_ = type(step_model)(a_m=float(theta[0]), b_m_per_hz=float(theta[1]),
                                                 c_m_per_m2ps4=float(theta[2]),
@@ -387,7 +420,7 @@ class FactorGraphFusion(Algorithm):
         return d[:, 0] * np.cos(poses[1:, 2]) + d[:, 1] * np.sin(poses[1:, 2])
 
     def _graph(self, problem: Problem, poses: np.ndarray, length: np.ndarray, dtheta: np.ndarray,
-               offset: SmoothSeries, use: np.ndarray, absolute: bool) -> gtsam.NonlinearFactorGraph:
+               deviation: np.ndarray, use: np.ndarray, absolute: bool) -> gtsam.NonlinearFactorGraph:
         graph = gtsam.NonlinearFactorGraph()
         if absolute:
             graph.add(factors.start_prior(gtsam.Pose2(*poses[0]), anchored=False))
@@ -395,9 +428,9 @@ class FactorGraphFusion(Algorithm):
             graph.add(factors.start_prior(gtsam.Pose2(0.0, 0.0, problem.heading0_rad), anchored=True))
         for i in range(problem.n_steps):
             graph.add(factors.step_factor(i, length[i], dtheta[i], problem.step_length_std_m[i],
-                                          problem.dtheta_std_rad[i], self.lateral_std_m))
+                                          problem.dtheta_std_rad[i], problem.lateral_std_m[i]))
         mag_idx = np.flatnonzero(np.isfinite(problem.mag_rad))
-        mag = problem.mag_rad[mag_idx] - offset(problem.epoch_t_s[1:][mag_idx])
+        mag = problem.mag_rad[mag_idx] - deviation_design(poses[mag_idx + 1, 2]) @ deviation
         for i, m in zip(mag_idx, mag):
             graph.add(factors.heading_factor(i + 1, m, problem.mag_std_rad[i], self.huber_k))
         for (k0, k1), length_m, std in zip(problem.stride_k, problem.stride_length_m, problem.stride_std_m):
@@ -417,12 +450,16 @@ class FactorGraphFusion(Algorithm):
         return graph
 
     @staticmethod
-    def _solve(graph: gtsam.NonlinearFactorGraph, poses: np.ndarray) -> tuple[np.ndarray, int, float]:
-        initial = gtsam.Values()
+    def _values(poses: np.ndarray) -> gtsam.Values:
+        values = gtsam.Values()
         for i, p in enumerate(poses):
-            initial.insert(factors.pose_key(i), gtsam.Pose2(*p))
+            values.insert(factors.pose_key(i), gtsam.Pose2(*p))
+        return values
+
+    @staticmethod
+    def _solve(graph: gtsam.NonlinearFactorGraph, initial: gtsam.Values) -> tuple[gtsam.Values, int, float]:
         params = gtsam.LevenbergMarquardtParams()
-        params.setRelativeErrorTol(1e-6)
+        params.setRelativeErrorTol(1e-5)
         params.setMaxIterations(100)
         try:
             optimizer = gtsam.LevenbergMarquardtOptimizer(graph, initial, params)
@@ -430,13 +467,10 @@ class FactorGraphFusion(Algorithm):
         except RuntimeError as exc:  # gtsam's "Indeterminant linear system" and friends never reach the user
             raise InputError(f"fusion: the factor graph could not be solved (expected every pose to be constrained "
                              f"by steps and an anchor; gtsam says: {str(exc).splitlines()[0]})") from None
-        return gtsam.utilities.extractPose2(result), optimizer.iterations(), optimizer.error()
+        return result, optimizer.iterations(), optimizer.error()
 
     @staticmethod
-    def _marginal_std(graph: gtsam.NonlinearFactorGraph, poses: np.ndarray) -> np.ndarray:
-        values = gtsam.Values()
-        for i, p in enumerate(poses):
-            values.insert(factors.pose_key(i), gtsam.Pose2(*p))
+    def _marginal_std(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, poses: np.ndarray) -> np.ndarray:
         try:
             marginals = gtsam.Marginals(graph, values)
         except RuntimeError as exc:

@@ -11,6 +11,7 @@ import pandas as pd
 from pdr.errors import InputError
 from pdr.fusion import factors
 from pdr.fusion._inputs import empty_trajectory
+from pdr.fusion._linear import deviation_design
 from pdr.fusion.graph import CHI2_2DOF_999, FactorGraphFusion, trajectory_frame
 
 
@@ -24,11 +25,15 @@ class IncrementalFusion(FactorGraphFusion):
 
     Parameters
     ----------
-    relinearize_threshold, relinearize_skip
-        iSAM2 relinearisation settings (gtsam ``ISAM2Params``).
+    relinearize_threshold, relinearize_skip, wildfire_threshold
+        iSAM2 relinearisation and back-substitution settings (gtsam ``ISAM2Params``, ``ISAM2GaussNewtonParams``);
+        the partial relinearisation check is on.
+    gyro_bias_radps, mag_deviation_coef
+        A calibration from an earlier batch run (``FactorGraphFusion.gyro_bias_radps_[-1]``,
+        ``mag_deviation_coef_``): removed from the heading changes / magnetometer headings. Default: none.
     All parameters of :class:`~pdr.fusion.FactorGraphFusion` are accepted; the step model, heading-rate bias and
-    magnetometer offset are *not* re-estimated here (a navigation run uses the calibrated model, e.g. from
-    ``pdr calibrate``): step lengths are the table's ``step_length_m``, magnetometer headings are used as given.
+    magnetometer deviation are *not* re-estimated here (a navigation run uses a calibration, e.g. from ``pdr
+    calibrate`` or an earlier batch run): step lengths are the table's ``step_length_m``.
 
     Attributes
     ----------
@@ -40,7 +45,8 @@ class IncrementalFusion(FactorGraphFusion):
     Notes
     -----
     Kaess et al. (2012), "iSAM2: Incremental smoothing and mapping using the Bayes tree". Each GNSS fix is gated
-    (chi-square on its innovation against the predicted position and its marginal covariance) before it is added,
+    (chi-square on its innovation against the predicted position and its marginal covariance; after
+    ``max_rejected_run`` rejections in a row the next fix is taken) before it is added,
     behind the same Huber kernel, tied to the nearest epoch with the fix moved along the current step.
 
     Examples
@@ -48,14 +54,20 @@ class IncrementalFusion(FactorGraphFusion):
     >>> IncrementalFusion().fuse(steps, gnss=fixes).solver_["time_per_step_ms"]  # doctest: +SKIP
     """
 
-    def __init__(self, *, relinearize_threshold: float = 0.1, relinearize_skip: int = 10, **kwargs):
+    def __init__(self, *, relinearize_threshold: float = 0.1, relinearize_skip: int = 10, wildfire_threshold: float = 0.01,
+                 gyro_bias_radps: float = 0.0,
+                 mag_deviation_coef: list[float] | None = None, **kwargs):
         super().__init__(**kwargs)
         self.relinearize_threshold = relinearize_threshold
         self.relinearize_skip = relinearize_skip
+        self.wildfire_threshold = wildfire_threshold
+        self.gyro_bias_radps = gyro_bias_radps
+        self.mag_deviation_coef = mag_deviation_coef
 
     @classmethod
     def param_names(cls) -> list[str]:
-        return ["relinearize_threshold", "relinearize_skip", *FactorGraphFusion.param_names()]
+        return ["relinearize_threshold", "relinearize_skip", "wildfire_threshold", "gyro_bias_radps", "mag_deviation_coef",
+                *FactorGraphFusion.param_names()]
 
     def fuse(self, steps: pd.DataFrame, *, gnss: pd.DataFrame | None = None, strides: pd.DataFrame | None = None,
              step_model=None, t_start_s: float | None = None) -> IncrementalFusion:
@@ -73,9 +85,18 @@ class IncrementalFusion(FactorGraphFusion):
             return self
         n = problem.n_steps
         n_fix = len(problem.gnss_row)
+        n_dev = deviation_design(np.zeros(1)).shape[1]
+        deviation = np.zeros(n_dev) if self.mag_deviation_coef is None else np.asarray(self.mag_deviation_coef, float)
+        if deviation.shape != (n_dev,) or not np.isfinite(deviation).all() or not np.isfinite(self.gyro_bias_radps):
+            raise InputError(f"IncrementalFusion: expected mag_deviation_coef of {n_dev} finite numbers and a finite "
+                             f"gyro_bias_radps, found {self.mag_deviation_coef!r}, {self.gyro_bias_radps!r}")
+        dtheta = problem.dtheta_rad - self.gyro_bias_radps * problem.step_duration_s
+        dtheta[0] = 0.0
         params = gtsam.ISAM2Params()
         params.setRelinearizeThreshold(self.relinearize_threshold)
         params.relinearizeSkip = self.relinearize_skip
+        params.enablePartialRelinearizationCheck = True
+        params.setOptimizationParams(gtsam.ISAM2GaussNewtonParams(self.wildfire_threshold))
         isam = gtsam.ISAM2(params)
         start = gtsam.Pose2(0.0, 0.0, problem.heading0_rad)
         if n_fix:
@@ -96,19 +117,20 @@ class IncrementalFusion(FactorGraphFusion):
         used = np.zeros(n_fix, bool)
         fix_order = np.argsort(problem.gnss_k + problem.gnss_alpha, kind="stable")
         stride_end = problem.stride_k[:, 1] if len(problem.stride_k) else np.zeros(0, int)
-        cursor = 0
+        cursor, rejected_in_row = 0, 0
         current = start
         t_steps = time.perf_counter()
         for i in range(n):
             graph = gtsam.NonlinearFactorGraph()
             values = gtsam.Values()
-            step = factors.step_factor(i, problem.step_length_m[i], problem.dtheta_rad[i], problem.step_length_std_m[i],
-                                       problem.dtheta_std_rad[i], self.lateral_std_m)
+            step = factors.step_factor(i, problem.step_length_m[i], dtheta[i], problem.step_length_std_m[i],
+                                       problem.dtheta_std_rad[i], problem.lateral_std_m[i])
             graph.add(step)
             predicted = current.compose(step.measured())
             values.insert(factors.pose_key(i + 1), predicted)
             if np.isfinite(problem.mag_rad[i]):
-                graph.add(factors.heading_factor(i + 1, problem.mag_rad[i], problem.mag_std_rad[i], self.huber_k))
+                mag = problem.mag_rad[i] - float(deviation_design(np.array([predicted.theta()]))[0] @ deviation)
+                graph.add(factors.heading_factor(i + 1, mag, problem.mag_std_rad[i], self.huber_k))
             for j in np.flatnonzero(stride_end == i + 1):
                 k0, k1 = problem.stride_k[j]
                 graph.add(factors.stride_factor(k0, k1, problem.stride_length_m[j], problem.stride_std_m[j], self.huber_k))
@@ -121,8 +143,11 @@ class IncrementalFusion(FactorGraphFusion):
                 at_fix = (1.0 - alpha) * ends[0] + alpha * ends[1]
                 innovation = problem.gnss_en_m[j] - at_fix
                 cov = pos_cov + np.eye(2) * problem.gnss_std_m[j] ** 2
-                if i > 0 and used.any() and innovation @ np.linalg.solve(cov, innovation) > self.gnss_gate_chi2:
+                if (i > 0 and used.any() and innovation @ np.linalg.solve(cov, innovation) > self.gnss_gate_chi2
+                        and rejected_in_row < self.max_rejected_run):
+                    rejected_in_row += 1
                     continue
+                rejected_in_row = 0
                 used[j] = True
                 graph.add(factors.gnss_shifted_factor(i + near, problem.gnss_en_m[j], ends[near] - at_fix,
                                                       factors.gnss_noise(problem.gnss_std_m[j], self.huber_k)))
@@ -145,8 +170,9 @@ class IncrementalFusion(FactorGraphFusion):
         self.step_model_ = step_model
         self.gnss_used_ = np.zeros(problem.gnss_n_rows, bool)
         self.gnss_used_[problem.gnss_row] = used
-        self.gyro_bias_radps_ = np.zeros(n)
-        self.mag_offset_rad_ = np.zeros(n)
+        self.gyro_bias_radps_ = np.full(n, float(self.gyro_bias_radps))
+        self.mag_deviation_coef_ = deviation
+        self.mag_deviation_rad_ = deviation_design(poses[1:, 2]) @ deviation
         self.solver_ = {"method": "isam2", "iterations": n, "alternations": 0, "final_error": float(isam.getFactorsUnsafe().error(estimate)), "time_s": time.perf_counter() - t_begin,
             "time_per_step_ms": 1e3 * t_loop / max(n, 1), "gnss_used": int(used.sum()),
             "gnss_rejected": int((~used).sum()), "causal": True}
