@@ -278,3 +278,77 @@ def test_indeterminate_graph_never_leaks_a_gtsam_error():
         warnings.simplefilter("error")
         traj = FactorGraphFusion().fuse(steps).trajectory_
     assert traj.heading_rad.iloc[0] == 0.0 and np.isfinite(traj.e_m).all()
+
+
+# ------------------------------------------------------------------------------------------------------------------
+# Gaps, gating, magnetometer deviation
+# ------------------------------------------------------------------------------------------------------------------
+
+
+def square_walk(n: int = 400, seed: int = 0, deviation=(0.05, 0.1, 0.0, 0.0, 0.0)):
+    """Laps of a square (50 steps a side) with GNSS every 2 steps and a magnetometer with a deviation curve."""
+    rng = np.random.default_rng(seed)
+    heading = (np.arange(n) // 50) * (np.pi / 2)
+    steps = simple_steps(n, heading_rad=0.0)
+    steps["heading_rad"] = heading
+    steps["heading_change_rad"] = np.diff(heading, prepend=heading[0])
+    dev = np.column_stack([np.ones(n), np.cos(heading), np.sin(heading), np.cos(2 * heading), np.sin(2 * heading)])
+    steps["mag_heading_rad"] = heading + dev @ np.asarray(deviation) + 0.02 * rng.standard_normal(n)
+    steps["mag_heading_std_rad"] = 0.05
+    e = np.concatenate([[0.0], np.cumsum(0.7 * np.cos(heading))])
+    nn = np.concatenate([[0.0], np.cumsum(0.7 * np.sin(heading))])
+    t = np.concatenate([[steps.t_s[0] - 0.55], steps.t_s])
+    gnss = pd.DataFrame({"t_s": t[::2] + 0.1, "e_m": e[::2] + rng.standard_normal(len(t[::2])),
+                         "n_m": nn[::2] + rng.standard_normal(len(t[::2])), "h_acc_m": 1.0})
+    return steps, gnss, e, nn
+
+
+def test_magnetometer_deviation_curve_is_calibrated():
+    steps, gnss, _, _ = square_walk()
+    f = FactorGraphFusion().fuse(steps, gnss=gnss)
+    # sin 2h is zero on a square's four headings (not observable here): compare the rest and the curve where walked
+    np.testing.assert_allclose(f.mag_deviation_coef_[:4], [0.05, 0.1, 0.0, 0.0], atol=0.03)
+    true = 0.05 + 0.1 * np.cos(steps.heading_rad.to_numpy())
+    np.testing.assert_allclose(f.mag_deviation_rad_, true, atol=0.02)
+
+
+def test_gate_keeps_long_runs_of_rejected_fixes():
+    from pdr.fusion.graph import gate
+
+    d2 = np.ones(40)
+    d2[3] = 100.0  # a lone outlier
+    d2[10:25] = 100.0  # 15 in a row: the path is wrong, not the fixes
+    use = gate(d2, 13.8, 10)
+    assert not use[3] and use[10:25].all() and use.sum() == 39
+
+
+def test_gap_step_lets_gnss_say_where_the_walker_went():
+    steps = simple_steps(60, heading_rad=0.0)
+    t = steps.t_s.to_numpy().copy()
+    t[30:] += 40.0  # 40 s of missed steps, walked at 1 m/s east
+    steps["t_s"] = t
+    truth_e = np.where(np.arange(60) < 30, 0.7 * (np.arange(60) + 1), 0.7 * (np.arange(60) + 1) + 40.0)
+    fix_t = np.arange(t[0], t[-1], 1.0)
+    fix_e = np.interp(fix_t, t, truth_e)
+    gnss = pd.DataFrame({"t_s": fix_t, "e_m": fix_e, "n_m": 0.0, "h_acc_m": 1.0})
+    f = FactorGraphFusion(calibrate_step_model=False).fuse(steps, gnss=gnss)
+    assert f.trajectory_.e_m.iloc[-1] == pytest.approx(truth_e[-1], abs=1.0)
+    assert f.gnss_used_.mean() > 0.95
+
+
+def test_masked_fixes_are_not_used():
+    steps, gnss, _, _ = square_walk(100)
+    gnss["masked"] = gnss.t_s > 20.0
+    f = FactorGraphFusion().fuse(steps, gnss=gnss)
+    assert not f.gnss_used_[gnss.masked.to_numpy()].any() and f.gnss_used_[~gnss.masked.to_numpy()].all()
+
+
+def test_incremental_uses_a_given_calibration():
+    steps, gnss, e, n = square_walk(200)
+    batch = FactorGraphFusion().fuse(steps, gnss=gnss)
+    plain = IncrementalFusion().fuse(steps)
+    calibrated = IncrementalFusion(mag_deviation_coef=batch.mag_deviation_coef_.tolist()).fuse(steps)
+    err = lambda tr: np.hypot(tr.e_m - e, tr.n_m - n).max()  # noqa: E731
+    assert err(calibrated.trajectory_) < 0.5 * err(plain.trajectory_)
+    with pytest.raises(InputError, match="mag_deviation_coef"):
+        IncrementalFusion(mag_deviation_coef=[0.1]).fuse(steps)
