@@ -42,9 +42,9 @@ def write_plot(path: Path, traj: pd.DataFrame, *, gnss: pd.DataFrame | None = No
     if ok_xy.any():
         x_all, y_all = x_all[ok_xy], y_all[ok_xy]
         span = max(float(np.ptp(x_all)), float(np.ptp(y_all)), 1.0)
-        margin = 0.08 * span
-        xlim = (float(x_all.min()) - margin, float(x_all.max()) + margin)
-        ylim = (float(y_all.min()) - margin, float(y_all.max()) + margin)
+        half = 0.58 * span  # a square view (equal axes) with a margin of 8% of the span
+        cx, cy = 0.5 * (float(x_all.min()) + float(x_all.max())), 0.5 * (float(y_all.min()) + float(y_all.max()))
+        xlim, ylim = (cx - half, cx + half), (cy - half, cy + half)
     else:
         span, xlim, ylim = 1.0, (-1.0, 1.0), (-1.0, 1.0)
     idx = np.unique(np.linspace(0, len(traj) - 1, min(len(traj), MAX_ELLIPSES)).round().astype(int)) if len(traj) else []
@@ -77,7 +77,7 @@ def write_plot(path: Path, traj: pd.DataFrame, *, gnss: pd.DataFrame | None = No
     ax.set_ylabel("north (m)")
     ax.set_xlim(*xlim)
     ax.set_ylim(*ylim)
-    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_aspect("equal", adjustable="box")
     ax.grid(True, lw=0.3)
     ax.set_title(title, fontsize=10)
     ax.legend(loc="best", fontsize=8)

@@ -26,7 +26,9 @@ from pdr.errors import InputError
 from pdr.geo import en_to_latlon
 from pdr.io.atomic import write_csv, write_text
 
-CSV_FLOAT_FORMAT = "%.10g"  # 10 significant digits: 1 mm at 1,000 km, 1e-8 deg of latitude (1 mm)
+CSV_FLOAT_FORMAT = "%.15g"  # prints the rounded values exactly (15 significant digits round-trip a decimal)
+# fixed decimals by unit suffix: microseconds, 0.1 mm, microradians, 1e-4 Hz, 1e-9 deg (0.1 mm)
+DECIMALS_BY_SUFFIX = {"_s": 6, "_m": 4, "_rad": 6, "_hz": 4, "_deg": 9}
 TRAJECTORY_COLUMNS = ("t_s", "e_m", "n_m", "heading_rad", "e_std_m", "n_std_m")
 STEPS_COLUMNS = ("step_id", "t_s", "step_length_m", "step_length_std_m", "step_freq_hz", "heading_rad", "source")
 STRIDES_COLUMNS = ("t_start_s", "t_end_s", "foot", "length_m", "length_std_m", "source")
@@ -37,6 +39,24 @@ def _require(df: pd.DataFrame, columns: tuple[str, ...], what: str) -> None:
     missing = [c for c in columns if c not in df.columns]
     if missing:
         raise InputError(f"{what}: expected columns {', '.join(columns)}, found {', '.join(map(str, df.columns)) or 'none'}")
+
+
+def fixed_decimals(df: pd.DataFrame) -> pd.DataFrame:
+    """Float columns rounded to the decimals of their unit suffix (``DECIMALS_BY_SUFFIX``), negative zero removed, so
+    that the CSV shows ``0.0000`` rather than ``7.4e-21`` and is byte-identical for identical results."""
+    out = df.copy()
+    for col in out.columns:
+        if not pd.api.types.is_float_dtype(out[col]):
+            continue
+        for suffix, decimals in DECIMALS_BY_SUFFIX.items():
+            if str(col).endswith(suffix):
+                out[col] = np.round(out[col].to_numpy(float), decimals) + 0.0
+                break
+    return out
+
+
+def _write_table(path: Path, df: pd.DataFrame) -> None:
+    write_csv(path, fixed_decimals(df), float_format=CSV_FLOAT_FORMAT)
 
 
 def trajectory_table(traj: pd.DataFrame, origin: tuple[float, float] | None) -> pd.DataFrame:
@@ -57,16 +77,16 @@ def steps_table(steps: pd.DataFrame) -> pd.DataFrame:
 
 
 def write_trajectory_csv(path: Path, traj: pd.DataFrame, origin: tuple[float, float] | None = None) -> None:
-    write_csv(path, trajectory_table(traj, origin), float_format=CSV_FLOAT_FORMAT)
+    _write_table(path, trajectory_table(traj, origin))
 
 
 def write_steps_csv(path: Path, steps: pd.DataFrame) -> None:
-    write_csv(path, steps_table(steps), float_format=CSV_FLOAT_FORMAT)
+    _write_table(path, steps_table(steps))
 
 
 def write_strides_csv(path: Path, strides: pd.DataFrame) -> None:
     _require(strides, STRIDES_COLUMNS, "strides")
-    write_csv(path, strides[list(STRIDES_COLUMNS)].reset_index(drop=True), float_format=CSV_FLOAT_FORMAT)
+    _write_table(path, strides[list(STRIDES_COLUMNS)].reset_index(drop=True))
 
 
 def jsonable(value: Any) -> Any:
