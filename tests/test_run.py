@@ -59,7 +59,7 @@ def test_run_writes_every_output(tmp_path, capsys):
     for key in ("distance_m", "n_steps", "duration_s", "step_model", "solver", "timings_s", "warnings", "one_line"):
         assert key in summary
     assert summary["n_steps"] == len(steps)
-    assert summary["distance_m"] == pytest.approx(np.sum(np.hypot(np.diff(traj["e_m"]), np.diff(traj["n_m"]))), rel=1e-6)
+    assert summary["distance_m"] == pytest.approx(np.sum(np.hypot(np.diff(traj["e_m"]), np.diff(traj["n_m"]))), abs=0.01)
     assert summary["gnss"]["valid"] == 20 and summary["gnss"]["used"] > 10
     assert summary["solver"]["fusion"] == "graph" and summary["solver"]["iterations"] > 0
     prov = json.loads((out / "run.json").read_text())
