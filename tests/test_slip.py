@@ -95,3 +95,15 @@ def test_fit_bad_and_degenerate_input():
         assert est.estimate(t, np.full(len(t), np.nan)).strides_.empty
     with pytest.raises(InputError, match="positive"):
         SlipBody(thigh_length_m=-0.5)
+
+
+def test_short_flow_gaps_do_not_shorten_strides():
+    est = SlipOpticalFlowStride(camera_from_knee_m=0.3, focal_px=140.0, strides_per_fit=1)
+    t, f, _, dur = _measured(est, (1.3, -0.2, math.radians(15), 12000.0), n_strides=3)
+    full = est.estimate(t, f).strides_.length_m.to_numpy()
+    q = np.ones_like(f)
+    gap = (np.mod(t - 0.2, dur) > 0.75 * dur) & (np.mod(t - 0.2, dur) < 0.80 * dur)  # 5% of each stride, mid swing
+    g = np.where(gap, np.nan, f)
+    holed = SlipOpticalFlowStride(**est.get_params()).estimate(t, g, np.where(gap, 0.0, q)).strides_.length_m.to_numpy()
+    # the lost samples are bridged, not counted as zero flow (which would cut ~10%); the refit itself moves a little
+    assert len(holed) == len(full) and np.all(holed / full > 0.97) and np.all(holed / full < 1.15)
