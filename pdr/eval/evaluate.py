@@ -30,6 +30,7 @@ from pdr.eval.metrics import (
 from pdr.io.recording import check_time, load_recording, read_csv
 
 STEP_F1_TOLERANCE_S = 0.25
+SIGNIFICANT_DIGITS = 7  # metrics are printed to 7 significant digits (far beyond their accuracy)
 STRIDE_MATCH_TOLERANCE_S = 0.25
 
 
@@ -197,4 +198,4 @@ def evaluate_run(out: Path, rec: Path, *, step_tolerance_s: float = STEP_F1_TOLE
         distance_ref = None
     gnss_used = int(summary.get("gnss", {}).get("used", 0) or 0) > 0
     metrics.update(_position_metrics(traj, ref, gnss_used, distance_ref))
-    return metrics
+    return {k: float(f"{v:.{SIGNIFICANT_DIGITS}g}") if isinstance(v, float) else v for k, v in metrics.items()}
