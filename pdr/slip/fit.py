@@ -385,17 +385,18 @@ class SlipOpticalFlowStride(Algorithm):
 
 
 def calibrate_slip_body(estimator: SlipOpticalFlowStride, t_s, forward_flow_pxps, quality, *, true_length_m: float,
-                        clearance_grid: tuple[float, ...] = (0.015, 0.02, 0.025, 0.03, 0.035)) -> SlipOpticalFlowStride:
+                        clearance_grid: tuple[float, ...] | None = None) -> SlipOpticalFlowStride:
     """Per-user body calibration on one walk of known mean stride length; returns a calibrated copy.
 
-    The swing heel clearance ratio is chosen from ``clearance_grid`` (the one whose mean fitted stride is closest
-    to the truth), then ``length_scale`` absorbs what is left. Fit once per user, reuse on every later walk (the
+    ``length_scale`` = true / fitted mean stride; with a ``clearance_grid`` the swing clearance ratio is chosen
+    first (the one whose mean fitted stride is closest to the truth). On simulated walks the grid over-fits a
+    short calibration walk (the scale alone did better), hence None by default: the estimator's own ratio. Fit once per user, reuse on every later walk (the
     thesis' parameters of Table 1 are per-user measurements in the same spirit).
     """
     if not (isinstance(true_length_m, (int, float)) and math.isfinite(true_length_m) and true_length_m > 0):
         raise InputError(f"calibrate_slip_body: expected a positive true_length_m, found {true_length_m!r}")
     best = None
-    for ratio in clearance_grid:
+    for ratio in clearance_grid or (estimator.swing_clearance_ratio,):
         est = SlipOpticalFlowStride(**{**estimator.get_params(), "swing_clearance_ratio": ratio, "length_scale": 1.0})
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
