@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import threading
 import time
 import warnings
 from typing import Any
@@ -67,6 +68,34 @@ def align_to_fixes(poses: np.ndarray, problem: Problem) -> np.ndarray:
     out[:, :2] = poses[:, :2] @ rot.T + shift
     out[:, 2] = poses[:, 2] + np.arctan2(rot[1, 0], rot[0, 0])
     return out
+
+
+DEEP_STACK_BYTES = 1 << 30  # gtsam recurses along the elimination tree: a 100,000-pose chain overflows 8 MB
+
+
+def with_deep_stack(fn, *args):
+    """Run ``fn(*args)`` in a thread with a large stack (virtual memory only) and return its result or raise its error.
+
+    gtsam's recursive elimination / marginalisation over a long chain (a walk of tens of thousands of steps) overflows
+    the default 8 MB stack and crashes the interpreter."""
+    out: dict = {}
+
+    def target() -> None:
+        try:
+            out["value"] = fn(*args)
+        except BaseException as exc:  # re-raised in the caller's thread
+            out["error"] = exc
+
+    previous = threading.stack_size(DEEP_STACK_BYTES)
+    try:
+        thread = threading.Thread(target=target, name="pdr-gtsam")
+        thread.start()
+    finally:
+        threading.stack_size(previous)
+    thread.join()
+    if "error" in out:
+        raise out["error"]
+    return out["value"]
 
 
 def gate(d2: np.ndarray, threshold: float, max_run: int) -> np.ndarray:
@@ -461,9 +490,10 @@ class FactorGraphFusion(Algorithm):
         params = gtsam.LevenbergMarquardtParams()
         params.setRelativeErrorTol(1e-5)
         params.setMaxIterations(100)
+        params.setOrderingType("METIS")
         try:
             optimizer = gtsam.LevenbergMarquardtOptimizer(graph, initial, params)
-            result = optimizer.optimize()
+            result = with_deep_stack(optimizer.optimize)
         except RuntimeError as exc:  # gtsam's "Indeterminant linear system" and friends never reach the user
             raise InputError(f"fusion: the factor graph could not be solved (expected every pose to be constrained "
                              f"by steps and an anchor; gtsam says: {str(exc).splitlines()[0]})") from None
@@ -472,7 +502,7 @@ class FactorGraphFusion(Algorithm):
     @staticmethod
     def _marginal_std(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, poses: np.ndarray) -> np.ndarray:
         try:
-            marginals = gtsam.Marginals(graph, values)
+            marginals = with_deep_stack(gtsam.Marginals, graph, values)
         except RuntimeError as exc:
             warnings.warn(f"fusion: marginal covariances unavailable ({str(exc).splitlines()[0]}); e_std_m/n_std_m are NaN",
                           stacklevel=3)
