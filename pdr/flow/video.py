@@ -2,12 +2,17 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import cv2
 import numpy as np
 
 from pdr.errors import InputError
+
+# FFmpeg's own decoder messages ("Slice pointer chain broken") would add lines to stderr; every problem they
+# signal is reported here as one InputError instead. Read when OpenCV's FFmpeg backend opens its first file.
+os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
 
 
 def read_video(path: str | Path, *, expected_frames: int | None = None, max_frames: int | None = None) -> np.ndarray:
