@@ -1,5 +1,6 @@
 """Optical flow measurement of a leg-camera video (Liu, MS thesis ch. 2): per frame pair, px/s, with a quality."""
 
+from pdr.flow.camera import CameraModel
 from pdr.flow.methods import (
     FLOW_COLUMNS,
     CorrelationOpticalFlow,
@@ -9,5 +10,5 @@ from pdr.flow.methods import (
 from pdr.flow.video import read_video
 
 __all__ = [
-    "FLOW_COLUMNS", "CorrelationOpticalFlow", "InterpolationOpticalFlow", "PhaseCorrelationOpticalFlow", "read_video",
+    "CameraModel",    "FLOW_COLUMNS", "CorrelationOpticalFlow", "InterpolationOpticalFlow", "PhaseCorrelationOpticalFlow", "read_video",
 ]

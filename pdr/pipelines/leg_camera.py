@@ -7,37 +7,18 @@ Config sections: ``[flow]`` (CorrelationOpticalFlow parameters; defaults scaled 
 from __future__ import annotations
 
 import warnings
-from typing import Any
 
 import numpy as np
 import pandas as pd
 
 from pdr.errors import InputError
-from pdr.flow import CorrelationOpticalFlow, read_video
+from pdr.flow import CameraModel, CorrelationOpticalFlow, read_video
 from pdr.io.recording import Recording
 from pdr.slip.fit import SlipOpticalFlowStride
 
-CAMERA_KEYS = ("fps", "focal_px", "cx_px", "cy_px", "width_px", "height_px")
+# The SLIP's shank reaches the ground (knee to heel); the subject's shank_length_m ends at the ankle.
 ANKLE_HEIGHT_RATIO = 0.039  # ankle height / body height (Winter 2009, Table 4.1)
 DEFAULT_HEIGHT_M = 1.75
-# the SLIP's shank reaches the ground (knee to heel), the subject's shank_length_m ends at the ankle
-
-
-def _camera(cfg: dict[str, Any]) -> tuple[dict[str, float], dict[str, Any]]:
-    cam, mount = cfg.get("camera"), cfg.get("mount")
-    if not isinstance(cam, dict) or not isinstance(mount, dict):
-        raise InputError(f"camera.toml: expected tables [camera] and [mount], found {', '.join(sorted(cfg)) or 'none'}")
-    missing = [f"camera.{k}" for k in CAMERA_KEYS if k not in cam]
-    missing += [f"mount.{k}" for k in ("segment", "distance_from_knee_m") if k not in mount]
-    if missing:
-        raise InputError(f"camera.toml: expected keys {', '.join(missing)}, found them missing")
-    for key in CAMERA_KEYS:
-        v = cam[key]
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v) or v <= 0:
-            raise InputError(f"camera.toml: expected a positive number for camera.{key}, found {v!r}")
-    if not str(mount["segment"]).startswith("shank_"):
-        raise InputError(f"camera.toml: expected mount.segment shank_left or shank_right, found {mount['segment']!r}")
-    return cam, mount
 
 
 def forward_flow(flow: pd.DataFrame) -> np.ndarray:
@@ -47,7 +28,7 @@ def forward_flow(flow: pd.DataFrame) -> np.ndarray:
     ok = np.isfinite(xy).all(axis=1)
     if ok.sum() < 3:
         return np.full(len(xy), np.nan)
-    _, _, vt = np.linalg.svd(xy[ok] - 0.0, full_matrices=False)
+    _, _, vt = np.linalg.svd(xy[ok], full_matrices=False)
     proj = xy @ vt[0]
     lo, hi = np.nanpercentile(proj, [1, 99])
     return proj if hi >= -lo else -proj
@@ -59,13 +40,13 @@ def camera_strides(rec: Recording, config: dict) -> pd.DataFrame | None:
         return None
     if rec.camera is None:
         raise InputError(f"{rec.video_path}: expected camera.toml beside the video, found none")
-    cam, mount = _camera(rec.camera)
+    cam = CameraModel.from_toml(rec.camera, what=f"{rec.path or rec.id}/camera.toml")
     n_expected = len(rec.frames) if rec.frames is not None else None
     frames = read_video(rec.video_path, expected_frames=n_expected)
-    if frames.shape[1:] != (int(cam["height_px"]), int(cam["width_px"])):
-        raise InputError(f"{rec.video_path}: expected {cam['width_px']}x{cam['height_px']} frames as camera.toml says, "
+    if frames.shape[1:] != (cam.height_px, cam.width_px):
+        raise InputError(f"{rec.video_path}: expected {cam.width_px}x{cam.height_px} frames as camera.toml says, "
                          f"found {frames.shape[2]}x{frames.shape[1]}")
-    t = rec.frames["t_s"].to_numpy() if rec.frames is not None else np.arange(len(frames)) / float(cam["fps"])
+    t = rec.frames["t_s"].to_numpy() if rec.frames is not None else np.arange(len(frames)) / cam.fps
     side = min(frames.shape[1:])
     patch = max(12, side // 5)
     flow_defaults = {"patch_px": patch, "grid_step_px": patch, "max_shift_px": max(4, patch // 2 - 2), "predict": True}
@@ -73,9 +54,9 @@ def camera_strides(rec: Recording, config: dict) -> pd.DataFrame | None:
     flow = flow_est.flow_
     subject = rec.subject
     slip_defaults = {
-        "camera_from_knee_m": float(mount["distance_from_knee_m"]),
-        "focal_px": float(cam["focal_px"]),
-        "foot": str(mount["segment"]).split("_")[1],
+        "camera_from_knee_m": cam.distance_from_knee_m,
+        "focal_px": cam.focal_px,
+        "foot": cam.side,
     }
     if "thigh_length_m" in subject:
         slip_defaults["thigh_length_m"] = float(subject["thigh_length_m"])
