@@ -291,7 +291,7 @@ class CorrelationOpticalFlow(_FrameFlow):
                 if not np.isfinite(peak) or peak < self.min_peak_corr:
                     continue
                 sx, sy = float(bx), float(by)
-                if self.subpixel and peak < 1.0 - 1e-6:  # a perfect match is an integer shift: keep it exact
+                if self.subpixel and peak < 1.0 - 1e-5:  # a perfect match (to float32 rounding) is an integer shift
                     if 0 < bx < corr.shape[1] - 1:
                         sx += self._parabola(corr[by, bx - 1], corr[by, bx], corr[by, bx + 1])
                     if 0 < by < corr.shape[0] - 1:
