@@ -106,7 +106,8 @@ def prepare(steps: pd.DataFrame, gnss: pd.DataFrame | None, strides: pd.DataFram
         raise InputError(f"steps: expected finite t_s, found {int((~np.isfinite(t)).sum())} non-finite value(s)")
     if len(t) > 1 and not (np.diff(t) > 0).all():
         bad = int(np.argmax(np.diff(t) <= 0))
-        raise InputError(f"steps: expected strictly increasing t_s, found {float(t[bad + 1])!r} after {float(t[bad])!r} (row {bad + 1})")
+        raise InputError(f"steps: expected strictly increasing t_s, found {float(t[bad + 1])!r} after {float(t[bad])!r} "
+                         f"(row {bad + 1})")
     length = _floats(steps, "step_length_m", "steps")
     if not np.isfinite(length).all() or (length < 0).any():
         raise InputError(f"steps: expected finite step_length_m >= 0 (metres), found "
@@ -135,7 +136,8 @@ def prepare(steps: pd.DataFrame, gnss: pd.DataFrame | None, strides: pd.DataFram
     if t_start_s is None:
         duration = _column_or(steps, "step_duration_s", "steps", np.nan)
         # the first step's duration, else the next one's (causal: only the first two steps), else half a second
-        first = duration[0] if np.isfinite(duration[0]) and duration[0] > 0 else (float(t[1] - t[0]) if len(t) > 1 else 0.5)
+        first = duration[0] if np.isfinite(duration[0]) and duration[0] > 0 else (
+            float(t[1] - t[0]) if len(t) > 1 else 0.5)
         t_start_s = float(t[0] - first)
     elif not np.isfinite(t_start_s) or t_start_s >= t[0]:
         raise InputError(f"t_start_s: expected a finite time before the first step ({float(t[0])!r}), found {t_start_s!r}")
@@ -181,7 +183,8 @@ def _add_gnss(problem: Problem, gnss: pd.DataFrame, default_h_acc_m: float, tole
     finite_t = t[np.isfinite(t)]
     if len(finite_t) > 1 and (np.diff(finite_t) < 0).any():
         bad = int(np.argmax(np.diff(finite_t) < 0))
-        raise InputError(f"gnss: expected t_s in increasing order, found {float(finite_t[bad + 1])!r} after {float(finite_t[bad])!r}")
+        raise InputError(f"gnss: expected t_s in increasing order, found {float(finite_t[bad + 1])!r} after "
+                         f"{float(finite_t[bad])!r}")
     valid = np.isfinite(t) & np.isfinite(en).all(axis=1) & np.isfinite(h_acc) & (h_acc > 0)
     if "masked" in gnss.columns:
         valid &= ~gnss["masked"].fillna(False).to_numpy(dtype=bool)

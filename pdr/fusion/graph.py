@@ -5,8 +5,6 @@ from __future__ import annotations
 import threading
 import time
 import warnings
-from typing import Any
-
 import gtsam
 import numpy as np
 import pandas as pd
@@ -260,7 +258,8 @@ class FactorGraphFusion(Algorithm):
             raise InputError(f"gnss_factor: expected one of {', '.join(GNSS_FACTORS)}, found {self.gnss_factor!r}")
         positive = ["default_step_length_std_m", "default_heading_change_std_rad", "lateral_std_m", "default_h_acc_m",
                     "huber_k", "gnss_gate_chi2", "gyro_bias_knot_s", "gyro_bias_rw_radps_per_sqrt_s",
-                    "gyro_bias_prior_std_radps", "mag_deviation_prior_std_rad", "alternation_tol_m", "prior_a_std_m", "prior_b_std_m_per_hz",
+                    "gyro_bias_prior_std_radps", "mag_deviation_prior_std_rad", "alternation_tol_m", "prior_a_std_m",
+                    "prior_b_std_m_per_hz",
                     "prior_c_std_m_per_m2ps4", "max_step_duration_s", "gap_speed_std_mps"]
         for name in positive:
             value = getattr(self, name)
@@ -433,7 +432,8 @@ class FactorGraphFusion(Algorithm):
         if calibrate:
             self.step_model_ = type(step_model)(a_m=float(theta[0]), b_m_per_hz=float(theta[1]),
                                                 c_m_per_m2ps4=float(theta[2]),
-                                                residual_std_m=model_prior.residual_std_m, covariance=(model_cov if model_cov is not None else model_prior.covariance).tolist())
+                                                residual_std_m=model_prior.residual_std_m,
+                                                covariance=(model_prior.covariance if model_cov is None else model_cov).tolist())
         else:
             self.step_model_ = step_model
         self.solver_ = {"method": "levenberg_marquardt", "iterations": lm_iterations, "alternations": alternation,
@@ -504,7 +504,8 @@ class FactorGraphFusion(Algorithm):
         try:
             marginals = with_deep_stack(gtsam.Marginals, graph, values)
         except RuntimeError as exc:
-            warnings.warn(f"fusion: marginal covariances unavailable ({str(exc).splitlines()[0]}); e_std_m/n_std_m are NaN",
+            warnings.warn(f"fusion: marginal covariances unavailable ({str(exc).splitlines()[0]}); "
+                          "e_std_m/n_std_m are NaN",
                           stacklevel=3)
             return np.full((len(poses), 2), np.nan)
         out = np.empty((len(poses), 2))

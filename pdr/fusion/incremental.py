@@ -12,7 +12,7 @@ from pdr.errors import InputError
 from pdr.fusion import factors
 from pdr.fusion._inputs import empty_trajectory
 from pdr.fusion._linear import deviation_design
-from pdr.fusion.graph import CHI2_2DOF_999, FactorGraphFusion, trajectory_frame
+from pdr.fusion.graph import FactorGraphFusion, trajectory_frame, with_deep_stack
 
 
 class IncrementalFusion(FactorGraphFusion):
@@ -72,6 +72,9 @@ class IncrementalFusion(FactorGraphFusion):
     def fuse(self, steps: pd.DataFrame, *, gnss: pd.DataFrame | None = None, strides: pd.DataFrame | None = None,
              step_model=None, t_start_s: float | None = None) -> IncrementalFusion:
         """Process the steps in time order (strides are added when their end step arrives)."""
+        return with_deep_stack(self._fuse, steps, gnss, strides, step_model, t_start_s)
+
+    def _fuse(self, steps, gnss, strides, step_model, t_start_s) -> IncrementalFusion:
         t_begin = time.perf_counter()
         self._check_params()
         if not (isinstance(self.relinearize_skip, int) and self.relinearize_skip >= 1 and self.relinearize_threshold > 0):
@@ -133,7 +136,8 @@ class IncrementalFusion(FactorGraphFusion):
                 graph.add(factors.heading_factor(i + 1, mag, problem.mag_std_rad[i], self.huber_k))
             for j in np.flatnonzero(stride_end == i + 1):
                 k0, k1 = problem.stride_k[j]
-                graph.add(factors.stride_factor(k0, k1, problem.stride_length_m[j], problem.stride_std_m[j], self.huber_k))
+                graph.add(factors.stride_factor(k0, k1, problem.stride_length_m[j], problem.stride_std_m[j],
+                                                self.huber_k))
             ends = np.array([[current.x(), current.y()], [predicted.x(), predicted.y()]])
             while cursor < n_fix and problem.gnss_k[fix_order[cursor]] <= i:
                 j = fix_order[cursor]
@@ -173,7 +177,9 @@ class IncrementalFusion(FactorGraphFusion):
         self.gyro_bias_radps_ = np.full(n, float(self.gyro_bias_radps))
         self.mag_deviation_coef_ = deviation
         self.mag_deviation_rad_ = deviation_design(poses[1:, 2]) @ deviation
-        self.solver_ = {"method": "isam2", "iterations": n, "alternations": 0, "final_error": float(isam.getFactorsUnsafe().error(estimate)), "time_s": time.perf_counter() - t_begin,
+        self.solver_ = {
+            "method": "isam2", "iterations": n, "alternations": 0,
+            "final_error": float(isam.getFactorsUnsafe().error(estimate)), "time_s": time.perf_counter() - t_begin,
             "time_per_step_ms": 1e3 * t_loop / max(n, 1), "gnss_used": int(used.sum()),
             "gnss_rejected": int((~used).sum()), "causal": True}
         return self
