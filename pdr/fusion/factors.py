@@ -8,7 +8,7 @@ position interpolated between the two poses around it; its Jacobian is checked n
 
 from __future__ import annotations
 
-from functools import partial
+from functools import lru_cache, partial
 
 import gtsam
 import numpy as np
@@ -41,8 +41,16 @@ def robust(model: gtsam.noiseModel.Base, huber_k: float) -> gtsam.noiseModel.Bas
     return gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.Huber.Create(huber_k), model)
 
 
+@lru_cache(maxsize=1 << 16)
 def gnss_noise(std_m: float, huber_k: float) -> gtsam.noiseModel.Base:
+    """Isotropic 2-D noise behind a Huber kernel; cached (noise models are shared, immutable, and a graph is rebuilt
+    at every alternation with the same ones)."""
     return robust(gtsam.noiseModel.Isotropic.Sigma(2, float(std_m)), huber_k)
+
+
+@lru_cache(maxsize=1 << 16)
+def heading_noise(std_rad: float, huber_k: float) -> gtsam.noiseModel.Base:
+    return robust(gtsam.noiseModel.Isotropic.Sigma(1, float(std_rad)), huber_k)
 
 
 def _interpolated_error(alpha: float, measured: np.ndarray, this: gtsam.CustomFactor, values: gtsam.Values,
@@ -75,8 +83,7 @@ def gnss_shifted_factor(k: int, measured_en_m: np.ndarray, shift_en_m: np.ndarra
 
 def heading_factor(i: int, heading_rad: float, std_rad: float, huber_k: float) -> gtsam.PoseRotationPrior2D:
     """Absolute heading (magnetometer, offset removed) of the pose at epoch ``i``, robust (Huber)."""
-    return gtsam.PoseRotationPrior2D(pose_key(i), gtsam.Rot2(float(heading_rad)),
-                                     robust(gtsam.noiseModel.Isotropic.Sigma(1, float(std_rad)), huber_k))
+    return gtsam.PoseRotationPrior2D(pose_key(i), gtsam.Rot2(float(heading_rad)), heading_noise(float(std_rad), huber_k))
 
 
 def stride_factor(k0: int, k1: int, length_m: float, std_m: float, huber_k: float) -> gtsam.RangeFactorPose2:

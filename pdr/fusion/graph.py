@@ -474,13 +474,13 @@ class FactorGraphFusion(Algorithm):
         if self.gnss_factor == "interpolated" and problem.n_steps > 0:
             for j, kk, a in zip(idx, k, alpha):
                 graph.add(factors.gnss_interpolated_factor(kk, a, problem.gnss_en_m[j],
-                                                           factors.gnss_noise(problem.gnss_std_m[j], self.huber_k)))
+                                                           factors.gnss_noise(float(problem.gnss_std_m[j]), self.huber_k)))
         else:
             nearest = np.where(alpha < 0.5, k, np.minimum(k + 1, problem.n_steps))
             shift = poses[nearest, :2] - interpolate_positions(poses, k, alpha)
             for j, m, s in zip(idx, nearest, shift):
                 graph.add(factors.gnss_shifted_factor(m, problem.gnss_en_m[j], s,
-                                                      factors.gnss_noise(problem.gnss_std_m[j], self.huber_k)))
+                                                      factors.gnss_noise(float(problem.gnss_std_m[j]), self.huber_k)))
         return graph
 
     @staticmethod
