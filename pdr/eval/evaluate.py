@@ -31,7 +31,7 @@ from pdr.io.recording import check_time, load_recording, read_csv
 
 STEP_F1_TOLERANCE_S = 0.25
 SIGNIFICANT_DIGITS = 7  # metrics are printed to 7 significant digits (far beyond their accuracy)
-STRIDE_MATCH_TOLERANCE_S = 0.25
+STRIDE_MATCH_MIN_OVERLAP = 0.5  # share of the longer stride covered by both
 
 
 def _read_out_table(out: Path, name: str, columns: tuple[str, ...]) -> pd.DataFrame:
@@ -85,22 +85,44 @@ def _step_metrics(est_steps: pd.DataFrame, ref: dict[str, Any], tolerance_s: flo
     return m
 
 
-def _stride_metrics(est: pd.DataFrame | None, ref: dict[str, Any], tolerance_s: float) -> dict[str, Any]:
+def _match_intervals(ref: pd.DataFrame, est: pd.DataFrame, min_overlap: float) -> tuple[np.ndarray, np.ndarray]:
+    """One-to-one matches of estimated to reference intervals, largest overlap first; the overlap, as a fraction of
+    the longer of the two, must reach ``min_overlap``. Stride sources cut strides at different gait events (a foot
+    INS at mid-stance, a reference at heel strike), so boundaries are not compared, only the share of time covered."""
+    rs, re_ = ref["t_start_s"].to_numpy(float), ref["t_end_s"].to_numpy(float)
+    es, ee = est["t_start_s"].to_numpy(float), est["t_end_s"].to_numpy(float)
+    overlap = np.minimum(ee[:, None], re_[None, :]) - np.maximum(es[:, None], rs[None, :])
+    longer = np.maximum((ee - es)[:, None], (re_ - rs)[None, :])
+    share = np.where(longer > 0, overlap / np.where(longer > 0, longer, 1.0), 0.0)
+    i_est, i_ref = [], []
+    used_e, used_r = set(), set()
+    for k in np.argsort(-share, axis=None, kind="stable"):
+        e, r = divmod(int(k), share.shape[1])
+        if share[e, r] < min_overlap:
+            break
+        if e not in used_e and r not in used_r:
+            used_e.add(e)
+            used_r.add(r)
+            i_est.append(e)
+            i_ref.append(r)
+    return np.asarray(i_ref, int), np.asarray(i_est, int)
+
+
+def _stride_metrics(est: pd.DataFrame | None, ref: dict[str, Any], min_overlap: float) -> dict[str, Any]:
     ref_strides = ref.get("strides")
     if est is None or ref_strides is None or not len(est) or not len(ref_strides):
         return {}
     errors = []
     for foot in sorted(set(ref_strides["foot"].astype(str)) & set(est["foot"].astype(str))):
-        r = ref_strides[ref_strides["foot"].astype(str) == foot].sort_values("t_end_s")
-        e = est[est["foot"].astype(str) == foot].sort_values("t_end_s")
-        i_ref, i_est = match_events(r["t_end_s"].to_numpy(float), e["t_end_s"].to_numpy(float), tolerance_s)
-        start_ok = np.abs(r["t_start_s"].to_numpy(float)[i_ref] - e["t_start_s"].to_numpy(float)[i_est]) <= tolerance_s
+        r = ref_strides[ref_strides["foot"].astype(str) == foot]
+        e = est[est["foot"].astype(str) == foot]
+        i_ref, i_est = _match_intervals(r, e, min_overlap)
         diff = e["length_m"].to_numpy(float)[i_est] - r["length_m"].to_numpy(float)[i_ref]
-        errors.extend(np.abs(diff[start_ok & np.isfinite(diff)]))
-    if not errors:
-        return {"n_strides_matched": 0, "stride_match_tolerance_s": tolerance_s}
-    return {"stride_length_mae_m": float(np.mean(errors)), "n_strides_matched": len(errors),
-            "stride_match_tolerance_s": tolerance_s}
+        errors.extend(np.abs(diff[np.isfinite(diff)]))
+    m = {"n_strides_ref": len(ref_strides), "n_strides_matched": len(errors), "stride_match_min_overlap": min_overlap}
+    if errors:
+        m["stride_length_mae_m"] = float(np.mean(errors))
+    return m
 
 
 def _position_metrics(traj: pd.DataFrame, ref: dict[str, Any], gnss_used: bool, distance_ref_m: float | None) -> dict[str, Any]:
@@ -183,7 +205,7 @@ def evaluate_run(out: Path, rec: Path, *, step_tolerance_s: float = STEP_F1_TOLE
 
     metrics: dict[str, Any] = {"recording_id": recording.id, "n_steps": len(steps)}
     metrics.update(_step_metrics(steps, ref, step_tolerance_s))
-    metrics.update(_stride_metrics(strides, ref, STRIDE_MATCH_TOLERANCE_S))
+    metrics.update(_stride_metrics(strides, ref, STRIDE_MATCH_MIN_OVERLAP))
 
     distance_m = path_length_m(traj[["e_m", "n_m"]].to_numpy(float))
     metrics["distance_m"] = distance_m
