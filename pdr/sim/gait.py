@@ -550,7 +550,8 @@ class WalkKinematics:
 
     def true_steps(self) -> pd.DataFrame:
         """``reference/steps.csv``: ``t_s, foot, step_length_m`` (horizontal pelvis distance since the previous
-        contact, or since the start of the bout), ``step_duration_s``, ``bout_id``."""
+        contact, or since the start of the bout), ``step_duration_s``, ``bout_id``, ``speed_mps`` (the planned speed of
+        the segment the step belongs to: the walking form's truth)."""
         hs = self.heel_strikes
         t_hs = hs["t_s"].to_numpy()
         bout = hs["bout"].to_numpy()
@@ -560,7 +561,8 @@ class WalkKinematics:
         now, before = self.pelvis_position_m(t_hs), self.pelvis_position_m(t_prev)
         return pd.DataFrame({"t_s": t_hs, "foot": hs["foot"].to_numpy(),
                              "step_length_m": np.hypot(*(now[:, :2] - before[:, :2]).T),
-                             "step_duration_s": t_hs - t_prev, "bout_id": bout})
+                             "step_duration_s": t_hs - t_prev, "bout_id": bout,
+                             "speed_mps": np.concatenate([b.speed_mps for b in self.bouts])})
 
     def true_strides(self) -> pd.DataFrame:
         """``reference/strides.csv``: heel strike to the next heel strike of the same foot within a bout,
