@@ -27,6 +27,7 @@ from pdr.heading import AttitudeStepHeading
 from pdr.io.atomic import atomic_dir
 from pdr.io.recording import Recording, load_recording
 from pdr.pipelines.foot import foot_strides
+from pdr.pipelines.gait_forms import per_form_step_lengths
 from pdr.pipelines.leg_camera import camera_strides
 from pdr.pipelines.steps import detect_steps, make_detector
 from pdr.report import (
@@ -183,6 +184,10 @@ def run_recording(rec: Path, out: Path, *, config_path=None, model_path=None, us
         model.estimate(model.prepare(steps, recording), subject=recording.subject)
         steps["step_length_m"] = np.asarray(model.step_length_m_, float)
         steps["step_length_std_m"] = np.asarray(model.step_length_std_m_, float)
+        gait_forms_info = None
+        if config.get("gait_forms") is not None and len(steps):  # per-form step models (issue 7)
+            steps, gait_forms_info = per_form_step_lengths(
+                recording, steps, config["gait_forms"], config, Path(config_path).parent if config_path else None)
         lap("step_length_s")
 
         stride_tables = [t for t in (foot_strides(recording, config), camera_strides(recording, config)) if t is not None]
@@ -228,6 +233,8 @@ def run_recording(rec: Path, out: Path, *, config_path=None, model_path=None, us
         "gnss": gnss_counts or {"fixes": 0, "valid": 0, "masked": 0, "used": 0},
         "warnings": run_warnings,
     }
+    if gait_forms_info is not None:
+        summary["gait_forms"] = gait_forms_info
     gnss_part = f"GNSS {gnss_counts['used']}/{gnss_counts['valid']} fixes used" if gnss_counts else "no GNSS"
     summary["one_line"] = (f"{recording.id}: {len(steps)} steps, {distance:.1f} m in {summary['duration_s']:.1f} s "
                            f"({method} fusion, {gnss_part}) -> {out}")
