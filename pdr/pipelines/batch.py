@@ -1,19 +1,35 @@
 """``pdr batch``: ``pdr run`` over many recordings, one output folder each, plus ``OUT/summary.csv``.
 
 Engines: a local process pool (default, no set-up) or Dask distributed (``--engine dask``: an existing cluster with
-``--scheduler ADDR``, else a ``LocalCluster`` started here). One bad recording never stops the batch; a second run
-skips recordings whose outputs are complete (each output folder appears only once complete, by atomic rename);
-outputs are identical whichever engine ran them (the summary has no timings).
+``--scheduler ADDR``, else a ``LocalCluster`` started here). Both run the same function, :func:`run_one`, in worker
+processes with one thread each for the numeric libraries, so the outputs are identical whichever engine ran them
+(``summary.csv`` has no timings; ``summary.json`` keeps the per-run timings of CONTRACT.md).
+
+- One bad recording never stops the batch: an error becomes a ``failed`` row with its one-line message; a worker
+  process that dies (a crash in native code, the kernel's out-of-memory killer) breaks only the pool, whose
+  unfinished recordings are then re-run one at a time in their own process, so only the culprit fails.
+- Resume: a second run skips a recording whose output folder is complete (it appears only once complete, by
+  atomic rename) and was made with the same options (``--config``/``--model`` file hashes and ``--no-gnss``, read
+  from its ``run.json``); anything else is run again.
+- A scheduler address that does not answer (nothing listening, a silent or foreign service) is an InputError
+  within :data:`SCHEDULER_TIMEOUT_S` seconds, before any work is sent.
+- Progress: a one-line counter on stderr when stderr is a terminal; silent otherwise.
 """
 
 from __future__ import annotations
 
+import json
+import multiprocessing
 import os
+import signal
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
+import warnings
+from collections import deque
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any, Iterable, Iterator
 
 import pandas as pd
 
@@ -22,15 +38,21 @@ from pdr.io.atomic import write_csv
 from pdr.io.tomlio import read_toml
 
 SUMMARY_COLUMNS = ["recording_id", "recording_path", "status", "distance_m", "n_steps", "duration_s", "error"]
-SCHEDULER_TIMEOUT_S = 10
+SCHEDULER_TIMEOUT_S = 4.0  # connect + handshake with --scheduler; with the imports (4-6 s on a loaded 2-core machine)
+# the command fails within 10 s
 COMPLETE_MARKERS = ("run.json", "summary.json", "trajectory.csv")
+# One thread per worker process for the numeric libraries (what Dask's nanny sets for its workers too): the
+# processes are the parallelism, and more threads than cores would only compete.
+THREAD_ENV = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS")
+
+Job = tuple[Path, Path, str]  # absolute recording path, absolute output folder, the recording path as given
 
 
 def _recording_id(rec: Path) -> str:
     """The id in meta.toml, or the folder name when meta.toml cannot be read (the run will then report why)."""
     try:
         return str(read_toml(rec / "meta.toml")["recording"]["id"])
-    except (InputError, KeyError, TypeError):
+    except (InputError, KeyError, TypeError, OSError):
         return rec.name
 
 
@@ -38,117 +60,293 @@ def is_complete(out_dir: Path) -> bool:
     return all((out_dir / name).is_file() for name in COMPLETE_MARKERS)
 
 
-def run_one(rec: Path, out_dir: Path, run_kwargs: dict[str, Any]) -> dict[str, Any]:
-    """Run one recording; never raises: a failure becomes a row with its one-line error."""
+def _options_match(out_dir: Path, run_kwargs: dict[str, Any]) -> bool:
+    """Whether the complete output in ``out_dir`` was made with the options of this batch (its run.json says)."""
+    from pdr.pipelines.run import sha256_file
+
+    try:
+        prov = json.loads((out_dir / "run.json").read_text())
+        expected = {name: sha256_file(Path(path)) if path is not None else None
+                    for name, path in (("config_file_sha256", run_kwargs["config_path"]),
+                                       ("model_file_sha256", run_kwargs["model_path"]))}
+        return (all(prov.get(k) == v for k, v in expected.items())
+                and prov.get("options", {}).get("use_gnss") == run_kwargs["use_gnss"])
+    except (OSError, ValueError, AttributeError):
+        return False
+
+
+def _one_line(exc: BaseException) -> str:
+    return " ".join(str(exc).split())[:300] or type(exc).__name__
+
+
+def _failed_row(given: str, message: str) -> dict[str, Any]:
+    return {"recording_path": given, "status": "failed", "error": message}
+
+
+def run_one(rec: Path, out_dir: Path, run_kwargs: dict[str, Any], given: str | None = None) -> dict[str, Any]:
+    """Run one recording; never raises: a failure becomes a row with its one-line error.
+
+    The run's warnings are not shown (a batch of hundreds would flood the terminal): each output's summary.json
+    lists them.
+    """
     from pdr.pipelines.run import run_recording
 
-    row: dict[str, Any] = {"recording_path": str(rec), "status": "ok", "error": ""}
+    row: dict[str, Any] = {"recording_path": given if given is not None else str(rec), "status": "ok", "error": ""}
     try:
-        summary = run_recording(rec, out_dir, force=True, **run_kwargs)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            summary = run_recording(rec, out_dir, force=True, **run_kwargs)
         row.update(distance_m=summary["distance_m"], n_steps=summary["n_steps"], duration_s=summary["duration_s"])
     except Exception as exc:  # the batch goes on; the row says why this recording failed
-        row.update(status="failed", error=" ".join(str(exc).split())[:300] or type(exc).__name__)
+        row.update(status="failed", error=_one_line(exc))
     return row
 
 
-def _completed_row(rec: Path, out_dir: Path) -> dict[str, Any]:
-    import json
-
+def _completed_row(given: str, out_dir: Path) -> dict[str, Any]:
     summary = json.loads((out_dir / "summary.json").read_text())
-    return {"recording_path": str(rec), "status": "ok", "error": "", "distance_m": summary["distance_m"],
+    return {"recording_path": given, "status": "skipped", "error": "", "distance_m": summary["distance_m"],
             "n_steps": summary["n_steps"], "duration_s": summary["duration_s"]}
 
 
 class _Progress:
-    """A one-line progress counter on a terminal; silent otherwise."""
+    """A one-line progress counter on stderr when it is a terminal; silent otherwise."""
 
-    def __init__(self, total: int):
-        self.total, self.done, self.t0 = total, 0, time.perf_counter()
-        self.enabled = sys.stderr.isatty() and total > 0
+    def __init__(self, total: int, stream=None):
+        self.stream = stream if stream is not None else sys.stderr
+        self.total, self.done, self.failed, self.t0 = total, 0, 0, time.perf_counter()
+        self.enabled = total > 0 and self.stream.isatty()
 
-    def tick(self) -> None:
+    def tick(self, row: dict[str, Any]) -> None:
         self.done += 1
+        self.failed += row["status"] == "failed"
         if self.enabled:
             elapsed = time.perf_counter() - self.t0
             eta = elapsed / self.done * (self.total - self.done)
-            print(f"\r[{self.done}/{self.total}] {elapsed:.0f} s elapsed, about {eta:.0f} s left ", end="", file=sys.stderr)
+            width = 30
+            bar = "#" * round(width * self.done / self.total)
+            failed = f", {self.failed} failed" if self.failed else ""
+            print(f"\r[{bar:<{width}}] {self.done}/{self.total}{failed}, {elapsed:.0f} s elapsed, about {eta:.0f} s left ",
+                  end="", file=self.stream, flush=True)
             if self.done == self.total:
-                print(file=sys.stderr)
+                print(file=self.stream, flush=True)
 
 
-def _run_local(jobs: list[tuple[Path, Path]], run_kwargs: dict, workers: int, progress: _Progress) -> Iterable[dict]:
-    if workers == 1:
-        for rec, out in jobs:
-            yield run_one(rec, out, run_kwargs)
-            progress.tick()
-        return
-    with ProcessPoolExecutor(max_workers=workers) as pool:
-        futures = [pool.submit(run_one, rec, out, run_kwargs) for rec, out in jobs]
-        for fut in as_completed(futures):
-            progress.tick()
-            yield fut.result()
+def _one_thread() -> None:
+    """Pool initializer: one thread for the numeric libraries of this worker process."""
+    for name in THREAD_ENV:
+        os.environ[name] = "1"
+    try:
+        import cv2
+
+        cv2.setNumThreads(1)
+    except ImportError:  # pragma: no cover - a core dependency
+        pass
+
+
+def _isolated_target(conn, job: Job, run_kwargs: dict[str, Any]) -> None:
+    _one_thread()
+    conn.send(run_one(job[0], job[1], run_kwargs, job[2]))
+    conn.close()
+
+
+def _run_isolated(job: Job, run_kwargs: dict[str, Any]) -> dict[str, Any]:
+    """Run one recording in a process of its own: a crash of that process fails this row only, and says how it died."""
+    ctx = multiprocessing.get_context()
+    receive, send = ctx.Pipe(duplex=False)
+    proc = ctx.Process(target=_isolated_target, args=(send, job, run_kwargs), daemon=True)
+    proc.start()
+    send.close()
+    row = None
+    try:
+        while row is None:
+            if receive.poll(0.2):
+                try:
+                    row = receive.recv()
+                except EOFError:  # the process ended without sending a row
+                    break
+            elif not proc.is_alive() and not receive.poll(0):
+                break
+    finally:
+        proc.join()
+    if row is not None:
+        return row
+    code = proc.exitcode
+    how = f"signal {-code} ({signal.Signals(-code).name})" if code is not None and code < 0 else f"exit code {code}"
+    return _failed_row(job[2], f"the worker process died while running this recording ({how}): a crash in native code "
+                                f"or the out-of-memory killer")
+
+
+def _run_local(jobs: list[Job], run_kwargs: dict, workers: int, progress: _Progress) -> Iterator[dict]:
+    """A process pool with at most ``workers`` recordings in flight, so that when a worker dies the suspects are few."""
+    queue = deque(jobs)
+    while queue:
+        suspects: list[Job] = []  # in flight when the pool broke
+        pool = ProcessPoolExecutor(max_workers=min(workers, len(queue)), initializer=_one_thread)
+        running: dict[Any, Job] = {}
+        broken = False
+        try:
+            while not broken and (queue or running):
+                while queue and len(running) < workers:
+                    try:
+                        running[pool.submit(run_one, queue[0][0], queue[0][1], run_kwargs, queue[0][2])] = queue[0]
+                    except BrokenProcessPool:
+                        broken = True
+                        break
+                    queue.popleft()
+                done, _ = wait(running, return_when=FIRST_COMPLETED)
+                for fut in done:
+                    job = running.pop(fut)
+                    try:
+                        row = fut.result()
+                    except BrokenProcessPool:
+                        suspects.append(job)
+                        broken = True
+                        continue
+                    except Exception as exc:  # e.g. arguments that cannot be sent to the worker
+                        row = _failed_row(job[2], _one_line(exc))
+                    progress.tick(row)
+                    yield row
+            suspects += running.values()
+            if broken and not suspects:  # broke before anything ran: isolate the next one, so the batch moves on
+                suspects.append(queue.popleft())
+        finally:
+            pool.shutdown(wait=True, cancel_futures=True)
+        for job in suspects:
+            row = _run_isolated(job, run_kwargs)
+            progress.tick(row)
+            yield row
+
+
+async def _identity(address: str, deadline: float) -> dict:
+    """Open a plain TCP connection first (nothing listening or an unknown host fails at once, without the dask
+    import or its connect retries), then ask the peer for its identity the Dask way, all before ``deadline``."""
+    import asyncio
+
+    scheme, _, rest = address.rpartition("://")
+    if scheme in ("", "tcp"):
+        host, _, port = rest.rpartition(":")
+        _, writer = await asyncio.wait_for(asyncio.open_connection(host.strip("[]"), int(port)),
+                                           deadline - time.monotonic())
+        writer.close()
+    from distributed.comm import connect
+
+    comm = await connect(address, timeout=max(deadline - time.monotonic(), 0.1))
+    try:
+        await comm.write({"op": "identity", "reply": True})
+        return await comm.read()
+    finally:
+        comm.abort()
+
+
+def _check_scheduler(address: str) -> None:
+    """Fail within SCHEDULER_TIMEOUT_S unless a Dask scheduler answers at ``address`` (dask's own connect timeout does
+    not bound a peer that accepts the connection and then stays silent, and retries a refused one until it ends)."""
+    import asyncio
+
+    what = f"--scheduler {address}: expected a Dask scheduler answering within {SCHEDULER_TIMEOUT_S:g} s"
+    scheme, _, rest = address.rpartition("://")
+    host, sep, port = rest.rpartition(":")
+    if not (scheme or "tcp").isidentifier() or not host or not sep or not port.isdigit():
+        raise InputError(f"--scheduler: expected an address like tcp://HOST:PORT, found {address!r}")
+    deadline = time.monotonic() + SCHEDULER_TIMEOUT_S
+    try:
+        reply = asyncio.run(asyncio.wait_for(_identity(address, deadline), SCHEDULER_TIMEOUT_S))
+    except (asyncio.TimeoutError, TimeoutError):
+        raise InputError(f"{what}, found no answer") from None
+    except ConnectionRefusedError:
+        raise InputError(f"{what}, found nothing listening (connection refused)") from None
+    except Exception as exc:  # unknown host, bad address, a service speaking another protocol
+        raise InputError(f"{what}, found {type(exc).__name__}: {_one_line(exc)}") from None
+    if not isinstance(reply, dict) or reply.get("type") != "Scheduler":
+        raise InputError(f"{what}, found a peer that is not a Dask scheduler ({str(reply)[:80]})")
 
 
 def _dask_client(scheduler: str | None, workers: int):
-    try:
-        from dask.distributed import Client, LocalCluster
-    except ImportError:
-        raise InputError("--engine dask: expected the dask[distributed] package, found it not installed (pip install 'pdr[dask]')") from None
+    import importlib.util
+    import logging
+
+    if importlib.util.find_spec("distributed") is None:
+        raise InputError("--engine dask: expected the dask[distributed] package, found it not installed (pip install 'pdr[dask]')")
+    if scheduler:
+        _check_scheduler(scheduler)
+    from dask.distributed import Client, LocalCluster
+
     if scheduler:
         try:
             return Client(scheduler, timeout=f"{SCHEDULER_TIMEOUT_S}s"), None
         except (OSError, TimeoutError) as exc:
-            raise InputError(f"--scheduler {scheduler}: expected a Dask scheduler answering within {SCHEDULER_TIMEOUT_S} s, found none ({exc})") from None
-    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None)
+            raise InputError(f"--scheduler {scheduler}: the scheduler answered, then the client could not connect ({_one_line(exc)})") from None
+    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
+                           silence_logs=logging.ERROR)
     return Client(cluster), cluster
 
 
-def _run_dask(jobs: list[tuple[Path, Path]], run_kwargs: dict, workers: int, scheduler: str | None,
-              progress: _Progress) -> Iterable[dict]:
+def _run_dask(jobs: list[Job], run_kwargs: dict, workers: int, scheduler: str | None, progress: _Progress) -> Iterator[dict]:
     from dask.distributed import as_completed as dask_as_completed
 
     client, cluster = _dask_client(scheduler, workers)
     try:
-        futures = [client.submit(run_one, rec, out, run_kwargs, pure=False) for rec, out in jobs]
+        futures = {client.submit(run_one, job[0], job[1], run_kwargs, job[2], pure=False): job for job in jobs}
         for fut in dask_as_completed(futures):
-            progress.tick()
-            yield fut.result()
+            try:
+                row = fut.result()
+            except Exception as exc:  # KilledWorker (the task's worker died, every retry) or a lost scheduler
+                row = _failed_row(futures[fut][2], f"dask: {type(exc).__name__}: {_one_line(exc)}")
+            progress.tick(row)
+            yield row
     finally:
         client.close()
         if cluster is not None:
             cluster.close()
 
 
+def _default_workers() -> int:
+    try:
+        return len(os.sched_getaffinity(0)) or 1
+    except AttributeError:  # not Linux
+        return os.cpu_count() or 1
+
+
 def run_batch(recs: list[Path], out: Path, *, engine: str = "local", workers: int | None = None, scheduler: str | None = None,
-              config_path: str | None = None, model_path: str | None = None, use_gnss: bool = True) -> str:
+              config_path: str | None = None, model_path: str | None = None, use_gnss: bool = True,
+              progress_stream=None) -> str:
     """Run every recording into ``out/<recording id>/`` and write ``out/summary.csv``; return a one-line summary.
 
     Raises InputError (after writing the summary) when any recording failed, so the exit code tells.
     """
     if engine not in ("local", "dask"):
         raise InputError(f"--engine: expected local or dask, found {engine!r}")
-    workers = workers or os.cpu_count() or 1
+    if scheduler is not None and engine != "dask":
+        raise InputError("--scheduler: expected it with --engine dask only")
+    workers = _default_workers() if workers is None else workers
     if workers < 1:
         raise InputError(f"--workers: expected at least 1, found {workers}")
     for path in (config_path, model_path):
         if path is not None and not Path(path).is_file():
             raise InputError(f"{path}: expected a file, found nothing there")
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise InputError(f"{out}: expected an output folder, found a file")
     ids: dict[str, Path] = {}
     for rec in recs:
+        rec = Path(rec)
         rid = _recording_id(rec)
         if rid in ids:
             raise InputError(f"recording id {rid!r}: expected unique ids, found it in both {ids[rid]} and {rec}")
         ids[rid] = rec
-    run_kwargs = {"config_path": config_path, "model_path": model_path, "use_gnss": use_gnss}
+    run_kwargs = {"config_path": str(Path(config_path).resolve()) if config_path is not None else None,
+                  "model_path": str(Path(model_path).resolve()) if model_path is not None else None,
+                  "use_gnss": use_gnss}
 
     rows: dict[str, dict] = {}
-    jobs: list[tuple[Path, Path]] = []
+    jobs: list[Job] = []
     for rid, rec in ids.items():
-        if is_complete(out / rid):
-            rows[str(rec)] = {**_completed_row(rec, out / rid), "status": "skipped"}
-        else:
-            jobs.append((rec, out / rid))
-    progress = _Progress(len(jobs))
+        if is_complete(out / rid) and _options_match(out / rid, run_kwargs):
+            rows[str(rec)] = _completed_row(str(rec), out / rid)
+        else:  # absolute paths: a Dask worker may run in another folder
+            jobs.append((rec.resolve(), (out / rid).resolve(), str(rec)))
+    progress = _Progress(len(jobs), progress_stream)
+    results: Iterable[dict]
     if engine == "local":
         results = _run_local(jobs, run_kwargs, workers, progress)
     else:
@@ -164,5 +362,6 @@ def run_batch(recs: list[Path], out: Path, *, engine: str = "local", workers: in
     line = (f"{len(table)} recordings: {counts.get('ok', 0)} ok, {counts.get('skipped', 0)} skipped (complete), "
             f"{counts.get('failed', 0)} failed -> {out / 'summary.csv'}")
     if counts.get("failed", 0):
-        raise InputError(line)
+        first = table[table["status"] == "failed"].iloc[0]
+        raise InputError(f"{line}; first failure {first['recording_id']}: {first['error']}")
     return line
