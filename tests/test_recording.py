@@ -72,3 +72,17 @@ def test_usage_error_exit_2():
     with pytest.raises(SystemExit) as exc:
         main(["no-such-command"])
     assert exc.value.code == 2
+
+
+def test_atomic_outputs_get_the_usual_modes(tmp_path):
+    """Temporary files are private (0600); the renamed output must not be."""
+    import os
+    from pdr.io.atomic import atomic_dir, write_text
+
+    mask = os.umask(0o022)
+    os.umask(mask)
+    write_text(tmp_path / "a.txt", "x")
+    with atomic_dir(tmp_path / "out") as tmp:
+        (tmp / "b.txt").write_text("y")
+    assert (tmp_path / "a.txt").stat().st_mode & 0o777 == 0o666 & ~mask
+    assert (tmp_path / "out").stat().st_mode & 0o777 == 0o777 & ~mask

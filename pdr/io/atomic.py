@@ -14,6 +14,17 @@ import pandas as pd
 from pdr.errors import InputError
 
 
+def _process_umask() -> int:
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+# tempfile creates private files (0600) and folders (0700); outputs get the modes of a plain open()/mkdir()
+FILE_MODE = 0o666 & ~_process_umask()
+DIR_MODE = 0o777 & ~_process_umask()
+
+
 @contextlib.contextmanager
 def atomic_path(dest: str | Path) -> Iterator[Path]:
     """Yield a temporary file path beside ``dest``; rename it onto ``dest`` only if the block succeeds."""
@@ -22,6 +33,7 @@ def atomic_path(dest: str | Path) -> Iterator[Path]:
     fd, tmp = tempfile.mkstemp(prefix=f".{dest.name}.", suffix=".tmp", dir=dest.parent)
     os.close(fd)
     tmp_path = Path(tmp)
+    tmp_path.chmod(FILE_MODE)
     try:
         yield tmp_path
         os.replace(tmp_path, dest)
@@ -51,6 +63,7 @@ def atomic_dir(dest: str | Path, *, force: bool = False) -> Iterator[Path]:
         raise InputError(f"{dest}: expected a new output folder, found an existing one (use --force to replace it)")
     dest.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{dest.name}.", suffix=".tmp", dir=dest.parent))
+    tmp.chmod(DIR_MODE)
     try:
         yield tmp
         if dest.exists():
