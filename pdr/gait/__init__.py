@@ -1,4 +1,9 @@
-"""Gait cycles, their Fourier representation (Watanabe et al., eq. 2) and walking forms (PCA + k-means, eq. 3)."""
+"""Gait cycles, their Fourier representation (Watanabe et al., eq. 2) and walking forms (PCA + k-means, eq. 3).
+
+- :mod:`pdr.gait.fourier`: least-squares Fourier expansion of a cyclic parameter (stable API);
+- :mod:`pdr.gait.cycles`: gait cycles (strides) of a body-worn IMU or a shoe IMU with their Fourier features;
+- :mod:`pdr.gait.forms`: :class:`FourierGaitForms` (PCA, k-means, transition diagram, named forms; JSON data only).
+"""
 
 from pdr.gait.fourier import (
     DEFAULT_ORDER,
@@ -11,9 +16,11 @@ from pdr.gait.fourier import (
     from_amplitude_phase,
     n_coefficients,
 )
+from pdr.gait.forms import FourierGaitForms, load_forms
 
 __all__ = [
     "DEFAULT_ORDER",
+    "FourierGaitForms",
     "amplitude_phase",
     "coefficient_names",
     "fourier_coefficients",
@@ -21,5 +28,6 @@ __all__ = [
     "fourier_design_matrix",
     "fourier_series",
     "from_amplitude_phase",
+    "load_forms",
     "n_coefficients",
 ]

@@ -20,6 +20,7 @@ from scipy.cluster.vq import kmeans2
 from pdr.base import Algorithm
 from pdr.constants import GRAVITY_MPS2
 from pdr.errors import InputError
+from pdr.gait.fourier import DEFAULT_ORDER
 
 FORMS_FORMAT = "pdr-gait-forms"
 FORMS_VERSION = 1
@@ -32,6 +33,9 @@ DEFAULT_LEG_LENGTH_M = LEG_LENGTH_PER_HEIGHT * 1.75
 FROUDE_SLOW = 0.1
 FROUDE_FAST = 0.3
 FROUDE_RUN = 0.5
+# Running has a flight phase, in which the trunk falls freely (vertical acceleration -g). A 5th-order Fourier series
+# rounds the short flight plateau, so a cycle whose lowest vertical acceleration is below -0.8 g is running.
+FLIGHT_FRACTION_OF_G = 0.8
 # Stairs climb at about 30-35 degrees, ramps at most ~5 (1:12): a path steeper than 15 degrees is stairs.
 STAIRS_MIN_SLOPE = np.tan(np.radians(15.0))
 # A stride that turns more than 30 degrees is a turn (a corner walked in one or two strides turns 45-90 per stride).
@@ -49,8 +53,24 @@ def speed_kind(speed_mps, leg_length_m: float) -> np.ndarray:
                     np.where(fr < FROUDE_RUN, "fast_walk", "run"))).astype(object)
 
 
-def form_kind(speed_mps: float, turn_rad_per_cycle: float, climb_rate_mps: float, leg_length_m: float) -> str:
-    """The name of a form from its mean speed, turn per cycle and climb rate (see the constants)."""
+def min_vertical_acc_mps2(cycles: pd.DataFrame, channel: str = "acc_v_mps2") -> np.ndarray:
+    """Lowest vertical acceleration (gravity removed) over each cycle, from its Fourier series; NaN without the
+    channel (shoe IMU cycles)."""
+    from pdr.gait.fourier import coefficient_names, fourier_design_matrix
+
+    cols = [f"{channel}_{c}" for c in coefficient_names(DEFAULT_ORDER)]
+    if not all(c in cycles.columns for c in cols):
+        return np.full(len(cycles), np.nan)
+    phase = np.linspace(0.0, 2.0 * np.pi, 4 * len(cols), endpoint=False)
+    return (cycles[cols].to_numpy(float) @ fourier_design_matrix(phase, DEFAULT_ORDER).T).min(axis=1)
+
+
+def form_kind(speed_mps: float, turn_rad_per_cycle: float, climb_rate_mps: float, leg_length_m: float,
+              min_acc_v_mps2: float = float("nan")) -> str:
+    """The name of a form from its speed, turn per cycle, climb rate and lowest vertical acceleration (see the
+    constants). Running is told by its flight phase where the trunk's vertical acceleration is known (it falls
+    freely, near -g, in flight; a walking trunk vaults over the stance leg and stays well above that), else by the
+    Froude number; the walking speeds by the Froude number."""
     if np.isfinite(climb_rate_mps) and np.isfinite(speed_mps) and speed_mps > 0:
         slope = climb_rate_mps / speed_mps
         if slope > STAIRS_MIN_SLOPE:
@@ -59,6 +79,13 @@ def form_kind(speed_mps: float, turn_rad_per_cycle: float, climb_rate_mps: float
             return "stairs_down"
     if np.isfinite(turn_rad_per_cycle) and abs(turn_rad_per_cycle) > TURN_MIN_RAD_PER_CYCLE:
         return "turning"
+    if np.isfinite(min_acc_v_mps2):
+        if min_acc_v_mps2 < -FLIGHT_FRACTION_OF_G * GRAVITY_MPS2:
+            return "run"
+        if not np.isfinite(speed_mps):
+            return "walk"
+        kind = str(speed_kind([speed_mps], leg_length_m)[0])
+        return "fast_walk" if kind == "run" else kind
     if not np.isfinite(speed_mps):
         return "walk"
     return str(speed_kind([speed_mps], leg_length_m)[0])
@@ -148,7 +175,7 @@ class FourierGaitForms(Algorithm):
     centroids_ : (n_forms, n_components) k-means centroids in the PCA space; ``within_var_`` pooled variance per axis,
         ``form_var_`` each form's own (floored at 5% of the pooled).
     forms_ : DataFrame, one row per form: ``form_id, form, kind, n_cycles, speed_mps, turn_rate_radps, climb_rate_mps,
-        step_freq_hz, duration_s`` (medians over the form's training cycles).
+        step_freq_hz, duration_s, min_acc_v_mps2`` (medians over the form's training cycles).
     transition_counts_, transition_ : (n_forms, n_forms) counts and row probabilities of form j following form i.
     labels_ : form id of each training cycle (after :meth:`fit`) or of each classified cycle (after :meth:`classify`).
     cycles_forms_ : after :meth:`classify`: ``t_start_s, t_end_s, form, form_id, kind, distance, source``
@@ -159,8 +186,9 @@ class FourierGaitForms(Algorithm):
     Watanabe et al. (section 4): the feature vectors f_k of many cycles are compressed to three dimensions by PCA,
     g_k = U (f_k - f_mean) (eq. 3), and clustered by k-means; each cluster is a walking form, and a transition diagram
     is built from the order in which the forms follow each other. Here the features are scaled first, one scale per
-    gait parameter (:func:`parameter_scales`: their units differ, m/s^2, rad/s, m/s, Hz), and each form is named from its mean speed (Froude number), turn per
-    cycle and climb slope (:func:`form_kind`).
+    gait parameter (:func:`parameter_scales`: their units differ, m/s^2, rad/s, m/s, Hz), and each form is named
+    from the medians of its cycles: speed (Froude number), turn per cycle, climb slope and, for a trunk IMU, the
+    lowest vertical acceleration (a flight phase: running) (:func:`form_kind`).
 
     Examples
     --------
@@ -168,7 +196,7 @@ class FourierGaitForms(Algorithm):
     >>> forms.classify(new_cycles).cycles_forms_.head()           # doctest: +SKIP
     """
 
-    def __init__(self, *, n_forms: int = 8, n_components: int = 3, seed: int = 0, n_init: int = 10,
+    def __init__(self, *, n_forms: int = 10, n_components: int = 3, seed: int = 0, n_init: int = 10,
                  smoothing: bool = False, leg_length_m: float | None = None) -> None:
         self.n_forms = n_forms
         self.n_components = n_components
@@ -289,6 +317,7 @@ class FourierGaitForms(Algorithm):
 
     def _describe(self, cycles: pd.DataFrame, labels: np.ndarray) -> pd.DataFrame:
         rows, seen = [], {}
+        min_acc = min_vertical_acc_mps2(cycles)
         for j in range(self.n_forms):
             sel = cycles[labels == j]
 
@@ -299,13 +328,16 @@ class FourierGaitForms(Algorithm):
                 return float(np.nanmedian(v)) if np.isfinite(v).any() else float("nan")
 
             turn_per_cycle = float(np.nanmedian(np.abs(sel["turn_rate_radps"] * sel["duration_s"]))) if len(sel) else np.nan
-            kind = form_kind(mean("speed_mps"), turn_per_cycle, mean("climb_rate_mps"), self.leg_length_used_m_)
+            low = min_acc[labels == j]
+            low = float(np.nanmedian(low)) if np.isfinite(low).any() else float("nan")
+            kind = form_kind(mean("speed_mps"), turn_per_cycle, mean("climb_rate_mps"), self.leg_length_used_m_, low)
             seen[kind] = seen.get(kind, 0) + 1
             name = kind if seen[kind] == 1 else f"{kind}_{seen[kind]}"
             rows.append({"form_id": j, "form": name, "kind": kind, "n_cycles": int(len(sel)),
                          "speed_mps": mean("speed_mps"), "turn_rate_radps": mean("turn_rate_radps"),
                          "turn_per_cycle_rad": turn_per_cycle, "climb_rate_mps": mean("climb_rate_mps"),
-                         "step_freq_hz": mean("step_freq_hz"), "duration_s": mean("duration_s")})
+                         "step_freq_hz": mean("step_freq_hz"), "duration_s": mean("duration_s"),
+                         "min_acc_v_mps2": low})
         return pd.DataFrame(rows)
 
     def classify(self, cycles: pd.DataFrame) -> FourierGaitForms:

@@ -36,7 +36,7 @@ STEP_MATCH_TOLERANCE_S = 0.15  # a detected step and a reference contact closer 
 MIN_STEPS_PER_MODEL = 30  # fewer matched steps than this do not fit a per-form step model (3 parameters)
 # default number of forms: about twice the kinds of gait each source can show (body IMU: slow / normal / fast walk,
 # run, turns; shoe IMU, a few recordings: level walking, turns, stairs up and down) -- see FourierGaitForms.n_forms
-BODY_N_FORMS = 8
+BODY_N_FORMS = 10
 FOOT_N_FORMS = 6
 GAIT_FORMS_KEYS = {"forms", "forms_file", "n_forms", "smoothing"}
 
@@ -112,7 +112,7 @@ def step_forms(steps: pd.DataFrame, labelled: pd.DataFrame) -> np.ndarray:
 def fit_forms(recs: list[Path], out: Path, *, config_path=None, n_forms: int | None = None) -> Path:
     """Learn the walking forms of ``recs`` and write ``out`` (JSON, atomically); return ``out``.
 
-    Configuration: ``[gait_forms]`` ``n_forms`` (default 8 for body-worn IMUs, 6 for shoe IMUs), ``smoothing``;
+    Configuration: ``[gait_forms]`` ``n_forms`` (default 10 for body-worn IMUs, 6 for shoe IMUs), ``smoothing``;
     ``[steps]``, ``[step_length]`` as for ``pdr steps``.
     """
     if not recs:

@@ -1,0 +1,240 @@
+"""Walking forms (issue 7, part 1): Fourier fit, gait cycles, forms on simulated walks and shoe IMUs, CLI, bad input."""
+
+from __future__ import annotations
+
+import json
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from pdr.cli.main import main
+from pdr.errors import InputError
+from pdr.gait import amplitude_phase, fourier_coefficients, fourier_derivative, fourier_series, from_amplitude_phase
+from pdr.gait.cycles import MAX_CYCLE_S, foot_cycles, foot_layout, imu_cycles, imu_layout, side_convention
+from pdr.gait.forms import FourierGaitForms, load_forms, speed_kind
+from pdr.io.recording import load_recording, save_recording
+from pdr.pipelines.gait_forms import classify_forms, recording_cycles
+from pdr.sim.simulator import simulate
+from pdr.signals import estimate_attitude, uniform_imu
+
+ROOT = Path(__file__).resolve().parents[1]
+GAITMAP = ROOT / "datasets" / "gaitmap_foot_imu_mocap"
+
+# a short mix of the four speed kinds (inside their Froude bands for any simulated height) on a route with corners
+SCENARIO = {
+    "route": {"waypoints_m": [[0, 0], [40, 0], [40, 30], [0, 30]], "loop": True},
+    "segment": [{"duration_s": 3, "speed_mps": 0}, {"duration_s": 30, "speed_mps": 0.85},
+                {"duration_s": 30, "speed_mps": 1.25}, {"duration_s": 25, "speed_mps": 1.9},
+                {"duration_s": 20, "speed_mps": 3.0}, {"duration_s": 25, "speed_mps": 1.25},
+                {"duration_s": 3, "speed_mps": 0}],
+    "gnss": {"enabled": False},
+}
+
+
+# ---------------------------------------------------------------------------------------------------- Fourier (eq. 2)
+def test_fourier_fit_is_exact_for_a_5th_order_series():
+    rng = np.random.default_rng(1)
+    coef = rng.standard_normal((11, 3))
+    phi = np.sort(rng.uniform(0, 2 * np.pi, 40))  # irregular phases, as on a real cycle
+    values = fourier_series(coef, phi)
+    np.testing.assert_allclose(fourier_coefficients(phi, values, order=5), coef, atol=1e-10)
+    # the paper's amplitude-phase form z = sum A_n sin(n eta + B_n) is the same function
+    amp, ph = amplitude_phase(coef[:, 0])
+    z = sum(amp[n] * np.sin(n * phi + ph[n]) for n in range(6))
+    np.testing.assert_allclose(z, values[:, 0], atol=1e-10)
+    np.testing.assert_allclose(from_amplitude_phase(amp, ph), coef[:, 0], atol=1e-12)
+    # derivative coefficients against a central difference
+    h = 1e-6
+    num = (fourier_series(coef[:, 1], phi + h) - fourier_series(coef[:, 1], phi - h)) / (2 * h)
+    np.testing.assert_allclose(fourier_series(fourier_derivative(coef[:, 1]), phi), num, atol=1e-6)
+
+
+def test_fourier_fit_least_squares_and_bad_input():
+    phi = np.linspace(0, 2 * np.pi, 200, endpoint=False)
+    # a 7th harmonic is orthogonal to the 5th-order basis on a uniform grid: the fit ignores it
+    c = fourier_coefficients(phi, 2.0 + np.sin(2 * phi) + 0.5 * np.cos(7 * phi))
+    np.testing.assert_allclose(c, [2.0, 0, 0, 0, 1.0, 0, 0, 0, 0, 0, 0], atol=1e-12)
+    with pytest.raises(InputError, match="at least 11 samples"):
+        fourier_coefficients(phi[:10], phi[:10])
+    with pytest.raises(InputError, match="shape"):
+        fourier_coefficients(phi, phi[:-1])
+    with pytest.raises(InputError, match="finite"):
+        fourier_coefficients(phi, np.where(phi > 1, np.nan, 0.0))
+
+
+def test_side_convention_puts_phase_shifted_cycles_together():
+    rng = np.random.default_rng(0)
+    c1 = (1.0 - 2.0j) * np.exp(1j * rng.normal(0, 0.2, 50))
+    shifted = rng.random(50) < 0.5
+    flip = side_convention(np.where(shifted, -c1, c1))
+    assert np.array_equal(flip, shifted) or np.array_equal(flip, ~shifted)
+    assert (np.where(flip, c1 * np.where(shifted, -1, 1) * -1, c1 * np.where(shifted, -1, 1)).imag < 0).all()
+
+
+# ---------------------------------------------------------------------------------------------------- cycles
+@pytest.fixture(scope="module")
+def sim_recs(tmp_path_factory) -> list[Path]:
+    base = tmp_path_factory.mktemp("gait_forms")
+    out = []
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for seed in (0, 1):
+            out.append(save_recording(simulate(SCENARIO, seed), base / f"mix{seed}"))
+    return out
+
+
+def _truth_kind(rec, cycles: pd.DataFrame) -> np.ndarray:
+    ref = rec.reference["steps"]
+    mid = 0.5 * (cycles["t_start_s"] + cycles["t_end_s"]).to_numpy()
+    j = np.clip(np.searchsorted(ref["t_s"].to_numpy(), mid), 0, len(ref) - 1)
+    return speed_kind(ref["speed_mps"].to_numpy()[j], 0.53 * rec.subject["height_m"])
+
+
+def test_imu_cycles_are_strides_with_the_layout(sim_recs):
+    rec = load_recording(sim_recs[0])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        cyc = recording_cycles(rec, {})
+    assert set(imu_layout()) <= set(cyc.columns)
+    assert len(cyc) > 50
+    ref = rec.reference["steps"]
+    walking = ref.groupby("bout_id")["t_s"].agg(["min", "max"])
+    # a stride is two steps: its duration is two reference step durations, within the sampling
+    assert np.median(cyc["duration_s"]) == pytest.approx(2 * np.median(ref["step_duration_s"]), rel=0.1)
+    assert ((cyc["t_start_s"] >= walking["min"].min() - 0.2) & (cyc["t_end_s"] <= walking["max"].max() + 0.2)).all()
+    # the vertical acceleration of a trunk IMU repeats every step: its 2nd stride harmonic dominates the 1st
+    amp2 = np.hypot(cyc["acc_v_mps2_a2"], cyc["acc_v_mps2_b2"])
+    amp1 = np.hypot(cyc["acc_v_mps2_a1"], cyc["acc_v_mps2_b1"])
+    assert np.median(amp2) > 3 * np.median(amp1)
+    # running is faster than slow walking in the speed column
+    kind = _truth_kind(rec, cyc)
+    assert cyc.loc[kind == "run", "speed_mps"].median() > 2 * cyc.loc[kind == "slow_walk", "speed_mps"].median()
+
+
+def test_cycles_too_short_or_too_long_are_dropped_with_a_warning(sim_recs):
+    rec = load_recording(sim_recs[0])
+    u = uniform_imu(rec.imu)
+    att = estimate_attitude(u)
+    t = np.array([10.0, 10.5, 11.0, 11.1, 11.2, 11.3, 20.0, 20.5, 21.0])  # good, too short, too long (one bout)
+    steps = pd.DataFrame({"t_s": t, "bout_id": 0, "heading_rad": 0.0})
+    with pytest.warns(UserWarning, match="dropped as not gait"):
+        cyc = imu_cycles(u, att, steps)
+    assert len(cyc) == 2 and (cyc["duration_s"] <= MAX_CYCLE_S).all() and (cyc["duration_s"] >= 0.5).all()
+    with pytest.warns(UserWarning, match="no gait cycle"):
+        empty = imu_cycles(u, att, steps.iloc[:2])
+    assert len(empty) == 0 and set(imu_layout()) <= set(empty.columns)
+
+
+# ---------------------------------------------------------------------------------------------------- forms
+def test_forms_learnt_on_one_walk_name_the_cycles_of_another(sim_recs):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        train, test = (recording_cycles(load_recording(p), {}) for p in sim_recs)
+    forms = FourierGaitForms().fit(train)
+    assert forms.components_.shape == (3, len(imu_layout()))
+    np.testing.assert_allclose(forms.components_ @ forms.components_.T, np.eye(3), atol=1e-9)  # U orthonormal
+    assert {"slow_walk", "walk", "run"} <= set(forms.forms_["kind"])
+    # the transition diagram: rows are probabilities, and staying in a form is the most common transition
+    np.testing.assert_allclose(forms.transition_.sum(axis=1), 1.0)
+    assert np.trace(forms.transition_counts_) > 0.7 * forms.transition_counts_.sum()
+    rec = load_recording(sim_recs[1])
+    truth = _truth_kind(rec, test)
+    got = forms.classify(test).cycles_forms_
+    straight = got["kind"] != "turning"
+    accuracy = float((got["kind"][straight] == truth[straight]).mean())
+    # one short walk of another person to learn from (the benchmark learns from four): well above chance (1/4)
+    assert accuracy > 0.7, pd.crosstab(truth, got["kind"].to_numpy())
+    # the data-only JSON round trip classifies identically
+    again = FourierGaitForms.from_dict(json.loads(json.dumps(forms.to_dict())))
+    assert np.array_equal(again.classify(test).labels_, got["form_id"].to_numpy())
+    # smoothing by the transition diagram gives a valid labelling too
+    forms.smoothing = True
+    assert set(forms.classify(test).labels_) <= set(range(forms.n_forms))
+
+
+def test_cli_round_trip_and_forms_file_errors(sim_recs, tmp_path, capsys):
+    forms_path = tmp_path / "forms.json"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert main(["gait-forms", "fit", str(sim_recs[0]), "-o", str(forms_path)]) == 0
+        assert main(["gait-forms", "classify", str(sim_recs[1]), "--forms", str(forms_path),
+                     "-o", str(tmp_path / "forms.csv")]) == 0
+    assert capsys.readouterr().out.split() == [str(forms_path), str(tmp_path / "forms.csv")]
+    table = pd.read_csv(tmp_path / "forms.csv")
+    assert list(table.columns[:3]) == ["t_start_s", "t_end_s", "form"] and len(table) > 50
+    assert (table["t_end_s"] > table["t_start_s"]).all()
+    doc = json.loads(forms_path.read_text())
+    assert doc["layout"] == imu_layout() and "all" in doc["step_models"]
+    # another feature layout: a clear InputError
+    doc["layout"] = foot_layout()
+    doc["mean"] = doc["scale"] = [1.0] * len(foot_layout())
+    doc["components"] = [[0.0] * len(foot_layout())] * 3
+    bad = tmp_path / "foot_forms.json"
+    bad.write_text(json.dumps(doc))
+    with pytest.raises(InputError, match="another feature layout"):
+        classify_forms(sim_recs[1], bad, tmp_path / "x.csv")
+    assert main(["gait-forms", "classify", str(sim_recs[1]), "--forms", str(bad), "-o", str(tmp_path / "x.csv")]) == 1
+    assert "another feature layout" in capsys.readouterr().err
+    (tmp_path / "junk.json").write_text('{"format": "something"}')
+    with pytest.raises(InputError, match="pdr-gait-forms"):
+        load_forms(tmp_path / "junk.json")
+    assert not (tmp_path / "x.csv").exists()
+
+
+def test_recording_without_cycles_gives_an_empty_table(sim_recs, tmp_path, small_recording):
+    forms_path = tmp_path / "forms.json"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        main(["gait-forms", "fit", str(sim_recs[0]), "-o", str(forms_path)])
+    still = load_recording(small_recording)
+    still.imu[[c for c in still.imu.columns if c.startswith("acc_")]] = [0.0, 0.0, 9.80665]
+    still_path = save_recording(still, tmp_path / "still")
+    with pytest.warns(UserWarning, match="no gait cycle|no walking"):
+        out = classify_forms(still_path, forms_path, tmp_path / "still.csv")
+    table = pd.read_csv(out)
+    assert len(table) == 0 and list(table.columns[:3]) == ["t_start_s", "t_end_s", "form"]
+
+
+def test_shoe_imu_cycles_climb_on_stairs(tmp_path):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        main(["import", "gaitmap", str(GAITMAP), str(tmp_path), "--rate-hz", "204.8"])
+    slope = {}
+    for name in ("walk_2x20m", "stairs_up", "stairs_down"):
+        rec = load_recording(tmp_path / name)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            cyc = recording_cycles(rec, {})
+        assert set(cyc["source"]) == {"foot_left", "foot_right"}
+        assert set(foot_layout()) <= set(cyc.columns)
+        slope[name] = np.degrees(np.arctan2(cyc["climb_rate_mps"], cyc["speed_mps"])).median()
+    # stairs climb at about 30 degrees, the lab floor is level
+    assert abs(slope["walk_2x20m"]) < 5 and slope["stairs_up"] > 15 and slope["stairs_down"] < -15
+    with pytest.raises(InputError, match="left' or 'right"):
+        foot_cycles(load_recording(tmp_path / "stairs_up").imu, "middle")
+
+
+def test_run_uses_per_form_step_models(sim_recs, tmp_path):
+    from pdr.pipelines.run import run_recording
+
+    forms_path = tmp_path / "forms.json"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        main(["gait-forms", "fit", str(sim_recs[0]), "-o", str(forms_path)])
+        cfg = tmp_path / "run.toml"
+        cfg.write_text('[gait_forms]\nforms = "forms.json"\n')  # relative to the configuration file
+        with_forms = run_recording(sim_recs[1], tmp_path / "out_forms", config_path=cfg)
+        plain = run_recording(sim_recs[1], tmp_path / "out_plain")
+    info = with_forms["gait_forms"]
+    assert info["n_cycles"] > 50 and sum(info["steps_per_form_model"].values()) > 100
+    steps = pd.read_csv(tmp_path / "out_forms" / "steps.csv")
+    assert len(steps) == plain["n_steps"]
+    # per-form models learnt on another simulated person's true step lengths: closer to the truth than the population
+    truth = load_recording(sim_recs[1]).reference["summary"]["distance_m"]
+    assert abs(with_forms["distance_m"] - truth) < abs(plain["distance_m"] - truth)
+    cfg.write_text('[gait_forms]\nforms = "missing.json"\n')
+    with pytest.raises(InputError, match="forms JSON file"):
+        run_recording(sim_recs[1], tmp_path / "out_bad", config_path=cfg)
