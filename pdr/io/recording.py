@@ -342,6 +342,32 @@ def load_recording(path: str | Path, *, with_reference: bool = True) -> Recordin
                      frames=frames, reference=reference, path=path)
 
 
+CSV_DIGITS = 9  # significant digits of the CSV tables (pdr.io.atomic.write_csv)
+
+
+def exact_time_column(df: pd.DataFrame, column: str = "t_s") -> pd.DataFrame:
+    """``df`` with ``column`` as text when 9 significant digits would merge or reorder distinct times.
+
+    The CSV tables are written with 9 significant digits; a clock far from zero (a Unix time, a clock jump) with
+    samples 10 ms apart needs more, or the written file would have repeated times that the validator rejects. Then
+    the column gets the fewest digits (up to 17, exact) that keep it strictly increasing; otherwise ``df`` is
+    returned unchanged (the usual case, so files stay as they were)."""
+    t = df[column].to_numpy(float)
+    if len(t) < 2 or not np.isfinite(t).all():
+        return df
+    mag = np.abs(t)
+    scale = 10.0 ** (CSV_DIGITS - 1 - np.floor(np.log10(np.where(mag > 0, mag, 1.0))))
+    if (np.diff(np.round(t * scale) / scale) > 0).all():
+        return df
+    for digits in range(CSV_DIGITS + 1, 18):
+        text = np.char.mod(f"%.{digits}g", t)
+        if (np.diff(text.astype(float)) > 0).all():
+            break
+    out = df.copy()
+    out[column] = text
+    return out
+
+
 def save_recording(rec: Recording, dest: str | Path, *, force: bool = False) -> Path:
     """Write a recording folder atomically (validated first). An existing ``dest`` needs ``force``."""
     dest = Path(dest)
@@ -351,11 +377,11 @@ def save_recording(rec: Recording, dest: str | Path, *, force: bool = False) -> 
     gnss = validate_gnss(rec.gnss, "gnss") if rec.gnss is not None else None
     with atomic_dir(dest, force=force) as tmp:
         write_text(tmp / "meta.toml", dumps_toml(rec.meta))
-        write_csv(tmp / "imu.csv", imu)
+        write_csv(tmp / "imu.csv", exact_time_column(imu))
         for placement, df in extra.items():
-            write_csv(tmp / f"imu_{placement}.csv", df)
+            write_csv(tmp / f"imu_{placement}.csv", exact_time_column(df))
         if gnss is not None:
-            write_csv(tmp / "gnss.csv", gnss)
+            write_csv(tmp / "gnss.csv", exact_time_column(gnss))
         if rec.camera is not None:
             write_text(tmp / "camera.toml", dumps_toml(rec.camera))
             if rec.video_path is not None:

@@ -257,6 +257,8 @@ def steady_clock(t: np.ndarray, values: np.ndarray, what: str) -> tuple[np.ndarr
     linearly onto a uniform grid at the mean rate (rounded to 1 Hz; the median of a wildly varying clock can be any
     of its modes) and warn. Only wild jitter (interquartile ratio
     of the sample intervals above ``MAX_DT_SPREAD``) is resampled."""
+    if len(t) < 2:
+        raise InputError(f"{what}: expected at least 2 samples with increasing time, found {len(t)}")
     dt = np.diff(t)
     q25, q75 = np.percentile(dt, [25, 75])
     if q25 > 0 and q75 / q25 <= MAX_DT_SPREAD:

@@ -51,7 +51,8 @@ EVENT_COLUMNS = ("s_id", "foot", "start", "end", "ic", "tc", "min_vel", "pre_ic"
 def _two_header_table(path: Path, what: str) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """First column and, per foot, the (N, 6) array acc_x..gyr_z of a two-header-row gaitmap IMU file."""
     df = read_table(path, what, header=[0, 1], index_col=0)
-    found = {(str(s), str(a)) for s, a in df.columns}
+    # a damaged first data row can make pandas give plain (not two-level) column labels: nothing is found then
+    found = {(str(c[0]), str(c[1])) for c in df.columns if isinstance(c, tuple) and len(c) == 2}
     missing = [f"{s}/{a}" for s in SENSORS for a in AXES if (s, a) not in found]
     if missing:
         raise InputError(f"{what}: expected two header rows (sensor: left_sensor/right_sensor; axis: acc_x..gyr_z), "

@@ -28,7 +28,7 @@ import pandas as pd
 from pdr.errors import InputError
 from pdr.io.atomic import atomic_dir, write_csv, write_text
 from pdr.io.importers._common import increasing_mask, require_file
-from pdr.io.recording import load_recording, validate_gnss
+from pdr.io.recording import exact_time_column, load_recording, validate_gnss
 from pdr.io.tomlio import dumps_toml
 
 MAX_GPX_BYTES = 200 * 1024**2
@@ -65,7 +65,7 @@ def read_gpx(path: Path) -> pd.DataFrame:
         raise InputError(f"{what}: expected plain GPX XML, found a DOCTYPE or ENTITY declaration (refused for safety)")
     try:
         root = ET.fromstring(data)
-    except ET.ParseError as exc:
+    except (ET.ParseError, LookupError, ValueError) as exc:  # LookupError: an unknown encoding in the XML declaration
         raise InputError(f"{what}: expected well-formed GPX XML, found {exc}") from None
     if _local(root.tag) != "gpx":
         raise InputError(f"{what}: expected a <gpx> document, found <{_local(root.tag)}>")
@@ -127,6 +127,6 @@ def import_source(src: Path, dest: Path, *, rate_hz: float | None = None, force:
         meta["geo"] = {"origin_lat_deg": float(gnss["lat_deg"].iloc[0]), "origin_lon_deg": float(gnss["lon_deg"].iloc[0])}
     with atomic_dir(dest, force=True) as tmp:
         shutil.copytree(dest, tmp, symlinks=True, dirs_exist_ok=True)
-        write_csv(tmp / "gnss.csv", gnss)
+        write_csv(tmp / "gnss.csv", exact_time_column(gnss))
         write_text(tmp / "meta.toml", dumps_toml(meta))
     return [dest]
