@@ -238,3 +238,14 @@ def test_run_uses_per_form_step_models(sim_recs, tmp_path):
     cfg.write_text('[gait_forms]\nforms = "missing.json"\n')
     with pytest.raises(InputError, match="forms JSON file"):
         run_recording(sim_recs[1], tmp_path / "out_bad", config_path=cfg)
+
+
+def test_dynamic_similarity_makes_features_dimensionless():
+    from pdr.gait.forms import similarity_factors
+
+    layout = ["acc_v_mps2_a0", "gyr_yaw_radps_b1", "speed_mps", "step_freq_hz", "climb_rate_mps"]
+    f = similarity_factors(layout, np.array([1.0, 0.81]))
+    g = 9.80665
+    np.testing.assert_allclose(f[0], [1 / g, np.sqrt(1 / g), 1 / np.sqrt(g), np.sqrt(1 / g), 1 / np.sqrt(g)])
+    # Froude number v^2 / (g L) = (dimensionless speed)^2
+    assert (1.2 * f[1, 2]) ** 2 == pytest.approx(1.2 ** 2 / (g * 0.81))
