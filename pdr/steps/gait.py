@@ -115,3 +115,18 @@ def bouts_from_mask(walking: np.ndarray, valid: np.ndarray, rate_hz: float, min_
         else:
             merged.append((a, b))
     return merged
+
+
+def core_walking(walking: np.ndarray, rate_hz: float, window_s: float) -> np.ndarray:
+    """The walking samples every detector window covering them agrees on: each walking run shrunk by half a window.
+
+    A window half walking already votes for walking (and the first window votes for the whole start of the
+    recording), so the edges of :func:`walking_mask`'s runs hold the walker starting, stopping or handling the phone;
+    the core holds walking only. A run shorter than a window has no core.
+    """
+    half = int(round(0.5 * window_s * rate_hz))
+    core = np.zeros(len(walking), bool)
+    for a, b in runs(walking):
+        if b - a > 2 * half:
+            core[a + half: b - half] = True
+    return core

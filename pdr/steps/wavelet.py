@@ -12,7 +12,7 @@ from pdr.base import Algorithm
 from pdr.errors import InputError
 from pdr.signals.attitude import gravity_direction_lowpass
 from pdr.signals.resample import UniformImu, moving_average, uniform_imu
-from pdr.steps.gait import bouts_from_mask, walking_mask
+from pdr.steps.gait import bouts_from_mask, core_walking, walking_mask
 
 STEP_COLUMNS = ["t_s", "bout_id"]
 BOUT_COLUMNS = ["bout_id", "t_start_s", "t_end_s", "step_period_s", "n_steps"]
@@ -66,6 +66,35 @@ def parabolic_offset(y: np.ndarray, k: np.ndarray) -> np.ndarray:
     return np.where(np.abs(den) > 1e-12, 0.5 * (a - c) / np.where(np.abs(den) > 1e-12, den, 1.0), 0.0)
 
 
+PEAK_NEIGHBOURS = 3  # maxima on each side that a maximum's amplitude is compared with (1.5 strides)
+
+
+def neighbour_reference(amp: np.ndarray, walking: np.ndarray, m: int) -> np.ndarray:
+    """The amplitude each maximum is judged against: the smaller of the medians of the ``m`` walking maxima before it
+    and the ``m`` walking maxima after it (one side only at the ends of a bout).
+
+    ``walking`` flags the maxima inside the core of the walking detector's mask (:func:`pdr.steps.gait.core_walking`);
+    only those serve as references, so a maximum at the edge of a bout (the walker starting, stopping, handling the
+    phone) is judged against the steps next to it, and a bout with no core is judged against its median maximum. A spurious
+    maximum between two steps is small against both sides; a step where the pace changes (fast walking followed by slow
+    walking, whose impacts are several times weaker) is small against one side only, and the side of its own pace keeps
+    it. A bout-wide median instead drops a whole slow stretch that follows a fast one.
+    """
+    n = len(amp)
+    pos = np.flatnonzero(walking)
+    if n == 0 or not len(pos):
+        return np.full(n, np.median(amp) if n else 0.0)  # a short bout: the median of its maxima
+    pad = np.concatenate([np.full(m, np.nan), amp[pos], np.full(m, np.nan)])
+    win = np.lib.stride_tricks.sliding_window_view(pad, m)  # win[j] = amp[pos][j - m : j]
+    i = np.arange(n)
+    before, after = np.searchsorted(pos, i, "left"), np.searchsorted(pos, i, "right")  # walking maxima < i, <= i
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN side at a bout end
+        left = np.nanmedian(win[before], axis=1)
+        right = np.nanmedian(win[after + m], axis=1)
+    return np.fmin(left, right)  # fmin ignores a NaN side; one walking maximum at least, so never both
+
+
 class WaveletStepDetection(Algorithm):
     """Steps as the maxima of one Meyer-wavelet detail of the acceleration norm, inside walking bouts.
 
@@ -77,7 +106,8 @@ class WaveletStepDetection(Algorithm):
     min_acc_std_mps2 : below this standard deviation of |a| a window is at rest.
     min_periodicity : a walking window's autocorrelation at the gait period is at least this.
     min_bout_steps : shorter walking runs are not walking (a turn on the spot, handling the phone).
-    min_peak_ratio : a maximum smaller than this fraction of the bout's median maximum is not a step.
+    min_peak_ratio : a maximum smaller than this fraction of its neighbours' maxima is not a step (see
+        :func:`neighbour_reference`: judged against the weaker of the two sides, so a change of pace keeps its steps).
     signal : ``"norm"`` (|a|) or ``"vertical"`` (a along the low-passed gravity direction); both orientation-free.
     bout_pad_s : walking bouts are widened by this (a window half walking already votes for walking).
     stride_check : whether a gait period may be a stride (thigh, arm); False for a sensor on the trunk (waist,
@@ -154,6 +184,7 @@ class WaveletStepDetection(Algorithm):
                                        min_periodicity=self.min_periodicity, stride_check=self.stride_check)
         bouts = bouts_from_mask(walking, u.valid, u.rate_hz, min_bout_s=self.min_bout_steps * min_step_s,
                                 pad_s=self.bout_pad_s)
+        core = core_walking(walking, u.rate_hz, self.bout_window_s)
         sums = (np.concatenate([[0.0], np.cumsum(x)]), np.concatenate([[0.0], np.cumsum(x * x)]))
         times, bout_ids, rows = [], [], []
         bout_id = 0
@@ -165,7 +196,7 @@ class WaveletStepDetection(Algorithm):
             step_s = float(np.median(p))
             local = period[a:b] if self.track_cadence else np.full(b - a, step_s)
             local = moving_average(np.where(np.isfinite(local), local, step_s), int(round(self.bout_window_s * u.rate_hz)))
-            t_peaks = self._bout_steps(u, x, a, b, local, sums)
+            t_peaks = self._bout_steps(u, x, a, b, local, core[a:b], sums)
             for seg in self._split_stops(t_peaks, step_s, max_step_s):
                 if len(seg) < self.min_bout_steps:
                     continue
@@ -178,7 +209,7 @@ class WaveletStepDetection(Algorithm):
             self.bouts_ = pd.DataFrame(rows, columns=BOUT_COLUMNS)
         return self
 
-    def _bout_steps(self, u: UniformImu, x: np.ndarray, a: int, b: int, period_s: np.ndarray,
+    def _bout_steps(self, u: UniformImu, x: np.ndarray, a: int, b: int, period_s: np.ndarray, walking: np.ndarray,
                     sums: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
         """Maxima of the level-``level`` detail, the bout resampled so the detail octave is centred on the cadence.
 
@@ -207,8 +238,8 @@ class WaveletStepDetection(Algorithm):
         k = k[detail[k] > 0]
         if not len(k):
             return np.zeros(0)
-        amp = detail[k]
-        k = k[amp >= self.min_peak_ratio * np.median(amp)]
+        inside = np.interp(tt[k], t, walking.astype(float)) > 0.5
+        k = k[detail[k] >= self.min_peak_ratio * neighbour_reference(detail[k], inside, PEAK_NEIGHBOURS)]
         tk = np.interp(k + parabolic_offset(detail, k), np.arange(n_out), tt)
         return self._refine_to_impact(u, x, tk, np.interp(tk, t, period_s), sums)
 
