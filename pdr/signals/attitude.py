@@ -14,6 +14,7 @@ import vqf
 from pdr.constants import GRAVITY_MPS2
 from pdr.signals.resample import UniformImu, moving_average
 
+ROTATE_BLOCK = 1 << 18  # rows per block in :func:`rotate` and :func:`yaw_increments` (bounded temporaries)
 GRAVITY_LOWPASS_S = 1.0  # without a gyroscope: gravity = mean specific force over about two steps
 
 
@@ -50,11 +51,20 @@ def quat_mul(p: np.ndarray, q: np.ndarray) -> np.ndarray:
 
 
 def rotate(q_wxyz: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Rotate vectors ``v`` (N, 3) by unit quaternions (N, 4): ``q v q*``."""
-    w = q_wxyz[:, :1]
-    u = q_wxyz[:, 1:]
-    t = 2.0 * np.cross(u, v)
-    return v + w * t + np.cross(u, t)
+    """Rotate vectors ``v`` (N, 3) by unit quaternions (N, 4): ``q v q*``.
+
+    In blocks of ``ROTATE_BLOCK`` rows: ``np.cross`` makes several temporaries of the input's size, which for a
+    10-hour recording at 100 Hz added half a gigabyte to the peak memory of ``pdr run``.
+    """
+    q_wxyz, v = np.asarray(q_wxyz), np.asarray(v)
+    out = np.empty(np.broadcast_shapes(v.shape, q_wxyz[:, 1:].shape), np.result_type(q_wxyz, v, float))
+    for a in range(0, len(out), ROTATE_BLOCK):
+        w = q_wxyz[a: a + ROTATE_BLOCK, :1]
+        u = q_wxyz[a: a + ROTATE_BLOCK, 1:]
+        vb = v[a: a + ROTATE_BLOCK] if len(v) == len(q_wxyz) else v
+        t = 2.0 * np.cross(u, vb)
+        out[a: a + ROTATE_BLOCK] = vb + w * t + np.cross(u, t)
+    return out
 
 
 def yaw_of(q_wxyz: np.ndarray) -> np.ndarray:
@@ -69,13 +79,18 @@ def yaw_increments(q_wxyz: np.ndarray) -> np.ndarray:
     The earth-frame increment ``q[k+1] q[k]*`` is turned into a rotation vector; its up component is the change of
     heading of every horizontal direction fixed to the body, whatever the device's orientation (no gimbal lock).
     """
-    conj = q_wxyz[:-1] * np.array([1.0, -1.0, -1.0, -1.0])
-    d = quat_mul(q_wxyz[1:], conj)
-    d = d * np.where(d[:, :1] < 0, -1.0, 1.0)
-    vnorm = np.linalg.norm(d[:, 1:], axis=1)
-    angle = 2.0 * np.arctan2(vnorm, d[:, 0])
-    scale = np.where(vnorm > 1e-12, angle / np.maximum(vnorm, 1e-300), 2.0)
-    return d[:, 3] * scale
+    q_wxyz = np.asarray(q_wxyz)
+    out = np.empty(max(len(q_wxyz) - 1, 0), np.result_type(q_wxyz, float))
+    for a in range(0, len(out), ROTATE_BLOCK):  # blocks: bounded temporaries on long recordings
+        q = q_wxyz[a: a + ROTATE_BLOCK + 1]
+        conj = q[:-1] * np.array([1.0, -1.0, -1.0, -1.0])
+        d = quat_mul(q[1:], conj)
+        d = d * np.where(d[:, :1] < 0, -1.0, 1.0)
+        vnorm = np.linalg.norm(d[:, 1:], axis=1)
+        angle = 2.0 * np.arctan2(vnorm, d[:, 0])
+        scale = np.where(vnorm > 1e-12, angle / np.maximum(vnorm, 1e-300), 2.0)
+        out[a: a + ROTATE_BLOCK] = d[:, 3] * scale
+    return out
 
 
 def gravity_direction_lowpass(acc_mps2: np.ndarray, rate_hz: float, window_s: float = GRAVITY_LOWPASS_S) -> np.ndarray:

@@ -60,14 +60,15 @@ def fft_frequency(x: np.ndarray, rate_hz: float, t0_s: float, t_s: np.ndarray, f
     win = max(4, int(round(window_s * rate_hz)))
     nfft = 1 << int(np.ceil(np.log2(max(win, rate_hz / FFT_RESOLUTION_HZ))))
     centre = np.round((t_s[ok] - t0_s) * rate_hz).astype(int)
-    idx = np.clip(centre[:, None] + np.arange(-(win // 2), win - win // 2)[None, :], 0, len(x) - 1)
-    seg = x[idx]
-    seg = (seg - seg.mean(axis=1, keepdims=True)) * np.hanning(win)[None, :]
+    offsets = np.arange(-(win // 2), win - win // 2)[None, :]
+    hann = np.hanning(win)[None, :]
     freqs = np.fft.rfftfreq(nfft, 1.0 / rate_hz)
     out_ok = np.full(len(centre), np.nan)
-    chunk = 2048  # bounded memory for long recordings
+    chunk = 2048  # bounded memory for long recordings: the windows too are cut per chunk
     for s in range(0, len(centre), chunk):
-        p = np.abs(np.fft.rfft(seg[s: s + chunk], nfft, axis=1)) ** 2
+        seg = x[np.clip(centre[s: s + chunk, None] + offsets, 0, len(x) - 1)]
+        seg = (seg - seg.mean(axis=1, keepdims=True)) * hann
+        p = np.abs(np.fft.rfft(seg, nfft, axis=1)) ** 2
         g = f_guess_hz[ok][s: s + chunk]
         band = (freqs[None, :] >= g[:, None] / np.sqrt(2)) & (freqs[None, :] <= g[:, None] * np.sqrt(2))
         p = np.where(band, p, -1.0)
