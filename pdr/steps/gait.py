@@ -15,6 +15,7 @@ import numpy as np
 from pdr.signals.resample import runs
 
 SUBHARMONIC_RATIO = 0.5  # the first acf peak at least this fraction of the best one is the fundamental period
+ACF_CHUNK = 4096  # windows per FFT block in window_acf
 
 
 def window_acf(x: np.ndarray, win: int, hop: int, max_lag: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -28,12 +29,13 @@ def window_acf(x: np.ndarray, win: int, hop: int, max_lag: int) -> tuple[np.ndar
     starts = np.arange(0, n - win + 1, hop)
     if starts[-1] != n - win:
         starts = np.append(starts, n - win)
-    idx = starts[:, None] + np.arange(win)[None, :]
-    w = x[idx]
-    w = w - w.mean(axis=1, keepdims=True)
     nfft = 1 << int(np.ceil(np.log2(2 * win)))
-    spec = np.fft.rfft(w, nfft, axis=1)
-    ac = np.fft.irfft(spec.real ** 2 + spec.imag ** 2, nfft, axis=1)[:, : max_lag + 1]
+    ac = np.empty((len(starts), max_lag + 1))
+    for a in range(0, len(starts), ACF_CHUNK):  # bounded temporaries: 10 h at 100 Hz took 1 GB at once
+        w = x[starts[a: a + ACF_CHUNK, None] + np.arange(win)[None, :]]
+        w = w - w.mean(axis=1, keepdims=True)
+        spec = np.fft.rfft(w, nfft, axis=1)
+        ac[a: a + ACF_CHUNK] = np.fft.irfft(spec.real ** 2 + spec.imag ** 2, nfft, axis=1)[:, : max_lag + 1]
     var = ac[:, :1]
     ac = ac / np.maximum(var, 1e-12) * (win / (win - np.arange(max_lag + 1)))[None, :]
     return starts, ac, np.sqrt(var[:, 0] / win)
