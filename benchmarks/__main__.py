@@ -1,7 +1,10 @@
-"""Run every ``benchmarks/bench_*.py`` (or those named), print one table, write ``out/bench/results.csv``.
+"""Run every ``benchmarks/bench_*.py`` (or the areas named), print one table, write ``out/bench/results.csv``.
 
 Each module has ``run(quick: bool) -> list[dict]``; a row has ``area, case, metric, ours, target, anchor, unit``
 (``anchor``: the published figure we compare with, as text with its source).
+
+Full (default) or ``--quick`` (smaller cases, a smoke run); areas by name (positional or ``--area``), e.g.
+``python -m benchmarks batch scale --quick``. ``make bench`` runs them all, full.
 """
 
 from __future__ import annotations
@@ -19,13 +22,23 @@ COLUMNS = ["area", "case", "metric", "ours", "unit", "target", "anchor"]
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m benchmarks")
-    parser.add_argument("names", nargs="*", help="benchmark modules to run (default: all), e.g. steps fusion")
-    parser.add_argument("--quick", action="store_true", help="smaller cases, for a smoke run")
-    parser.add_argument("-o", "--output", default="out/bench/results.csv")
-    args = parser.parse_args(argv)
     here = Path(__file__).parent
-    names = args.names or sorted(m.name[len("bench_"):] for m in pkgutil.iter_modules([str(here)]) if m.name.startswith("bench_"))
+    available = sorted(m.name[len("bench_"):] for m in pkgutil.iter_modules([str(here)]) if m.name.startswith("bench_"))
+    parser = argparse.ArgumentParser(
+        prog="python -m benchmarks",
+        description="Accuracy, speed and memory benchmarks of pdr: one table printed and written as CSV. "
+                    "Full size by default (minutes to tens of minutes); --quick for a smoke run.",
+        epilog=f"areas: {', '.join(available)}")
+    parser.add_argument("names", nargs="*", metavar="AREA", help="areas (benchmark modules) to run; default: all")
+    parser.add_argument("--area", action="append", default=[], metavar="AREA",
+                        help="an area to run (repeatable; same as the positional names)")
+    parser.add_argument("--quick", action="store_true", help="smaller cases, for a smoke run (default: full size)")
+    parser.add_argument("-o", "--output", default="out/bench/results.csv", help="CSV of the table (default: %(default)s)")
+    args = parser.parse_args(argv)
+    names = list(dict.fromkeys(args.names + args.area)) or available
+    unknown = [n for n in names if n not in available]
+    if unknown:
+        parser.error(f"unknown area(s) {', '.join(unknown)}: expected one of {', '.join(available)}")
     rows = []
     for name in names:
         t0 = time.perf_counter()
