@@ -91,9 +91,10 @@ def run_one(rec: Path, out_dir: Path, run_kwargs: dict[str, Any], given: str | N
     """
     from pdr.pipelines.run import run_recording
 
+    _one_thread()
     row: dict[str, Any] = {"recording_path": given if given is not None else str(rec), "status": "ok", "error": ""}
     try:
-        with warnings.catch_warnings():
+        with warnings.catch_warnings(), _pandas_one_thread():
             warnings.simplefilter("ignore")
             summary = run_recording(rec, out_dir, force=True, **run_kwargs)
         row.update(distance_m=summary["distance_m"], n_steps=summary["n_steps"], duration_s=summary["duration_s"])
@@ -131,8 +132,19 @@ class _Progress:
                 print(file=self.stream, flush=True)
 
 
+def _pandas_one_thread():
+    """pandas >= 3.1 parses a large CSV on several threads: one here (the worker processes are the parallelism)."""
+    import contextlib
+
+    try:
+        pd.get_option("mode.max_threads")
+    except (KeyError, pd.errors.OptionError):
+        return contextlib.nullcontext()
+    return pd.option_context("mode.max_threads", 1)
+
+
 def _one_thread() -> None:
-    """Pool initializer: one thread for the numeric libraries of this worker process."""
+    """One thread for the numeric libraries of this worker process (libraries that read these at start-up)."""
     for name in THREAD_ENV:
         os.environ[name] = "1"
     try:
