@@ -26,6 +26,7 @@ from pdr.geo import latlon_to_en
 from pdr.heading import AttitudeStepHeading
 from pdr.io.atomic import atomic_dir
 from pdr.io.recording import Recording, load_recording
+from pdr.pipelines.faults import rejected_gnss, sensor_faults, warning_line, warning_objects, widen_steps
 from pdr.pipelines.foot import foot_strides
 from pdr.pipelines.gait_forms import per_form_step_lengths
 from pdr.pipelines.leg_camera import camera_strides
@@ -197,7 +198,13 @@ def run_recording(rec: Path, out: Path, *, config_path=None, model_path=None, us
         gnss = gnss_local(recording, settings) if use_gnss else None
         lap("gnss_s")
 
-        fusion.fuse(steps, gnss=fusion_gnss(gnss), strides=strides, step_model=model)
+        faults = sensor_faults(recording.imu, gnss, config.get("faults"))  # [faults]: SensorFaultDetection
+        steps = widen_steps(steps, faults.faults_, float(recording.imu["t_s"].iloc[0]))
+        gnss_suspect = faults.gnss_suspect_ if gnss is not None else None
+        lap("faults_s")
+
+        fusion.fuse(steps, gnss=fusion_gnss(gnss if gnss is None else gnss.assign(masked=gnss["masked"] | gnss_suspect)),
+                    strides=strides, step_model=model)
         traj = fusion.trajectory_.reset_index(drop=True)
         if len(steps):
             steps["step_length_m"] = np.asarray(fusion.step_length_m_, float)
@@ -209,6 +216,9 @@ def run_recording(rec: Path, out: Path, *, config_path=None, model_path=None, us
         lap("fusion_s")
 
     run_warnings = [" ".join(str(w.message).split()) for w in caught]
+    rejected = (rejected_gnss(gnss, gnss_suspect, gnss_used, float(traj["t_s"].iloc[0]), float(traj["t_s"].iloc[-1]))
+                if gnss is not None else [])
+    warning_list = warning_objects(faults.faults_, rejected, run_warnings)
 
     steps.insert(0, "step_id", np.arange(len(steps), dtype=int))
     steps["source"] = STEP_SOURCE
@@ -219,7 +229,7 @@ def run_recording(rec: Path, out: Path, *, config_path=None, model_path=None, us
     if gnss is not None:
         valid = np.isfinite(gnss["e_m"].to_numpy()) & np.isfinite(gnss["n_m"].to_numpy())
         gnss_counts = {"fixes": len(gnss), "valid": int(valid.sum()), "masked": int((gnss["masked"] & valid).sum()),
-                       "used": int(gnss_used.sum())}
+                       "jumped": int((gnss_suspect & valid).sum()), "used": int(gnss_used.sum())}
     step_model = {"model": type(model).__name__, "params": model.get_params()}
     summary: dict[str, Any] = {
         "recording_id": recording.id,
@@ -230,8 +240,8 @@ def run_recording(rec: Path, out: Path, *, config_path=None, model_path=None, us
         "walking_duration_s": float(steps["t_s"].iloc[-1] - steps["t_s"].iloc[0]) if len(steps) > 1 else 0.0,
         "step_model": step_model,
         "solver": solver,
-        "gnss": gnss_counts or {"fixes": 0, "valid": 0, "masked": 0, "used": 0},
-        "warnings": run_warnings,
+        "gnss": gnss_counts or {"fixes": 0, "valid": 0, "masked": 0, "jumped": 0, "used": 0},
+        "warnings": warning_list,
     }
     if gait_forms_info is not None:
         summary["gait_forms"] = gait_forms_info
@@ -247,7 +257,7 @@ def run_recording(rec: Path, out: Path, *, config_path=None, model_path=None, us
         "options": {"use_gnss": use_gnss, "plot": plot},
         "config": {"input": config, "steps": make_detector(config.get("steps"), recording.placement).get_params(),
                    "heading": AttitudeStepHeading.from_config(config.get("heading")).get_params(),
-                   "gnss": settings, "step_length": step_model,
+                   "gnss": settings, "step_length": step_model, "faults": faults.get_params(),
                    "fusion": {"method": method, "params": fusion.get_params()}},
     }
 
@@ -270,6 +280,6 @@ def run_recording(rec: Path, out: Path, *, config_path=None, model_path=None, us
         lap("write_s")
         summary["timings_s"] = {**timings, "total_s": sum(timings.values())}
         write_json(tmp / "summary.json", summary)
-    for message in run_warnings:
+    for message in [warning_line(w) for w in warning_list if w["kind"] != "general"] + run_warnings:
         warnings.warn(message, stacklevel=2)
     return summary

@@ -20,6 +20,9 @@ Scenario keys (TOML; every table but ``[[segment]]`` and ``[route]`` is optional
 ``[gait]`` ``cv_slow``, ``cv_fast`` (per-step step-length variability at 0.6 and 1.7 m/s).
 ``[camera]`` a leg camera rendered by :mod:`pdr.sim.camera`: ``fps, focal_px, cx_px, cy_px, width_px, height_px,
     segment, distance_from_knee_m, texture`` (``gravel``/``brick``/a path), optional ``t_start_s, t_end_s``.
+``[[fault]]`` / ``[faults]`` sensor faults injected into the recording (:mod:`pdr.sim.faults`): explicit ones
+    (``kind``, ``t_start_s``, ``duration_s``, ...) and/or random ones (``fraction``, ``kinds``, ...); their truth goes
+    to ``reference/faults.csv``.
 
 Randomness: ``numpy.random.default_rng([seed, k])`` with a fixed ``k`` per component (person, steps, each IMU,
 GNSS, steel), so a seed gives byte-identical files.
@@ -44,7 +47,8 @@ from pdr.sim.gnss import GnssSpec, simulate_gnss
 from pdr.sim.route import Route
 from pdr.sim.sensors import ImuSpec, MagneticField, place_steel, synthesize_imu
 
-SECTIONS = ("simulation", "subject", "geo", "route", "segment", "imu", "gnss", "magnetic", "barometer", "gait", "camera")
+SECTIONS = ("simulation", "subject", "geo", "route", "segment", "imu", "gnss", "magnetic", "barometer", "gait", "camera",
+            "fault", "faults")
 KEYS = {
     "simulation": {"id": str, "description": str},
     "subject": {"height_m": float, "mass_kg": float},
@@ -314,6 +318,11 @@ def simulate(scenario: dict[str, Any], seed: int, *, workdir: Path | None = None
             "geo": {"origin_lat_deg": origin[0], "origin_lon_deg": origin[1]}}
     rec = Recording(meta=meta, imu=imus[main], extra_imus={k: v for k, v in imus.items() if k != main}, gnss=gnss,
                     reference=reference)
+    if "fault" in scenario or "faults" in scenario:
+        from pdr.sim.faults import inject_faults, scenario_faults
+
+        rec, truth = inject_faults(rec, scenario_faults(scenario, duration, seed), seed)
+        rec.reference["faults"] = truth
     if sc.camera is not None:
         workdir = Path(tempfile.mkdtemp(prefix="pdr-sim-")) if workdir is None else workdir
         rec.camera, rec.video_path, rec.frames = _render_camera(kin, sc.camera, seed, workdir, duration)
