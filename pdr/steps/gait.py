@@ -122,13 +122,19 @@ def bouts_from_mask(walking: np.ndarray, valid: np.ndarray, rate_hz: float, min_
 def core_walking(walking: np.ndarray, rate_hz: float, window_s: float) -> np.ndarray:
     """The walking samples every detector window covering them agrees on: each walking run shrunk by half a window.
 
-    A window half walking already votes for walking (and the first window votes for the whole start of the
-    recording), so the edges of :func:`walking_mask`'s runs hold the walker starting, stopping or handling the phone;
-    the core holds walking only. A run shorter than a window has no core.
+    A window half walking already votes for walking, and the first and last windows of :func:`walking_mask` vote
+    for the whole start and end of the recording, so the edges of its runs hold the walker starting, stopping or
+    handling the phone; the core holds walking only. The recording's ends count as not walking (the samples before
+    the first window's central hop and after the last one's were never decided). A run shorter than a window has no core.
     """
+    n = len(walking)
+    win = int(round(window_s * rate_hz))
+    hop = max(1, win // 4)
+    undecided = (win - hop) // 2  # as in walking_mask: each window decides for its central hop
     half = int(round(0.5 * window_s * rate_hz))
-    core = np.zeros(len(walking), bool)
+    core = np.zeros(n, bool)
     for a, b in runs(walking):
-        if b - a > 2 * half:
-            core[a + half: b - half] = True
+        a, b = max(a, undecided) + half, min(b, n - undecided) - half
+        if b > a:
+            core[a:b] = True
     return core

@@ -241,11 +241,13 @@ class WaveletStepDetection(Algorithm):
         inside = np.interp(tt[k], t, walking.astype(float)) > 0.5
         k = k[detail[k] >= self.min_peak_ratio * neighbour_reference(detail[k], inside, PEAK_NEIGHBOURS)]
         tk = np.interp(k + parabolic_offset(detail, k), np.arange(n_out), tt)
-        return self._refine_to_impact(u, x, tk, np.interp(tk, t, period_s), sums)
+        return self._refine_to_impact(u, x, tk, np.interp(tk, t, period_s), sums, walking, t[0])
 
     def _refine_to_impact(self, u: UniformImu, x: np.ndarray, tk: np.ndarray, step_s: np.ndarray,
-                          sums: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
-        """Move each maximum to the largest |a| within a quarter step (the contact impact)."""
+                          sums: tuple[np.ndarray, np.ndarray], core: np.ndarray, core_t0_s: float) -> np.ndarray:
+        """Move each maximum to the largest |a| within a quarter step (the contact impact); drop it when |a| barely
+        varies around it (over the step, or over the stride inside the core of walking: ``core`` flags the samples
+        from ``core_t0_s`` on)."""
         half = np.maximum(1, np.round(0.25 * step_s * u.rate_hz).astype(int))
         centre = np.clip(np.round((tk - u.t_s[0]) * u.rate_hz).astype(int), 0, len(x) - 1)
         offs = np.arange(-half.max(), half.max() + 1)
@@ -257,9 +259,14 @@ class WaveletStepDetection(Algorithm):
         tb, step_s = tb[order], step_s[order]
         keep = np.concatenate([[True], np.diff(tb) >= 0.5 * step_s[1:]])
         tb, step_s = tb[keep], step_s[keep]
-        # the rest test of the bout detector, per step: |a| must vary over the step around the contact
-        i0 = np.clip(np.round((tb - 0.5 * step_s - u.t_s[0]) * u.rate_hz).astype(int), 0, len(x) - 1)
-        i1 = np.clip(np.round((tb + 0.5 * step_s - u.t_s[0]) * u.rate_hz).astype(int) + 1, 1, len(x))
+        # the rest test of the bout detector, per step: |a| must vary around the contact. At the edges of walking
+        # (starting, stopping, quiet standing next to a bout) over the step itself; inside the core of walking over
+        # the stride around it (both feet's contacts), so that a slow, light step (0.6 m/s: |a| std 0.2-0.4 m/s2 from
+        # step to step) is not taken for rest, while a pause of a few steps inside a bout still is.
+        in_core = core[np.clip(np.round((tb - core_t0_s) * u.rate_hz).astype(int), 0, len(core) - 1)]
+        span = np.where(in_core, 1.0, 0.5) * step_s
+        i0 = np.clip(np.round((tb - span - u.t_s[0]) * u.rate_hz).astype(int), 0, len(x) - 1)
+        i1 = np.clip(np.round((tb + span - u.t_s[0]) * u.rate_hz).astype(int) + 1, 1, len(x))
         c1, c2 = sums
         cnt = np.maximum(i1 - i0, 1)
         var = (c2[i1] - c2[i0]) / cnt - ((c1[i1] - c1[i0]) / cnt) ** 2
