@@ -273,14 +273,17 @@ def _check_scheduler(address: str) -> None:
         raise InputError(f"{what}, found a peer that is not a Dask scheduler ({str(reply)[:80]})")
 
 
-def _dask_client(scheduler: str | None, workers: int):
+def _check_dask_installed() -> None:
     import importlib.util
-    import logging
 
     if importlib.util.find_spec("distributed") is None:
         raise InputError("--engine dask: expected the dask[distributed] package, found it not installed (pip install 'pdr[dask]')")
-    if scheduler:
-        _check_scheduler(scheduler)
+
+
+def _dask_client(scheduler: str | None, workers: int):
+    import logging
+
+    _check_dask_installed()
     from dask.distributed import Client, LocalCluster
 
     if scheduler:
@@ -339,6 +342,9 @@ def run_batch(recs: list[Path], out: Path, *, engine: str = "local", workers: in
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise InputError(f"{out}: expected an output folder, found a file")
+    if engine == "dask" and scheduler:  # first: its answer bounds the time to an error, whatever the recordings
+        _check_dask_installed()
+        _check_scheduler(scheduler)
     ids: dict[str, Path] = {}
     for rec in recs:
         rec = Path(rec)
