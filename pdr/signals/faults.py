@@ -38,6 +38,9 @@ TRIADS = {"acc": ACC_COLUMNS, "gyr": GYR_COLUMNS, "mag": MAG_COLUMNS}
 # flat at its extreme below these is not clipped by a sensor range.
 MIN_FULL_SCALE = {"acc": 2.0 * GRAVITY_MPS2 * 0.95, "gyr": np.radians(125.0) * 0.95}
 _MAD_TO_SIGMA = 1.4826
+MAG_DERIVATIVE_SMOOTH_S = 0.1  # the field is smoothed over this before its time derivative (noise)
+MAG_ROTATION_FLOOR_UTPS = 5.0  # a residual below this (µT/s) is never a disturbance (a noiseless synthetic file)
+GRAVITY_TOLERANCE = 0.02  # |averaged specific force| within 2% of g: the average is gravity (no turn, no speed change)
 
 
 def empty_faults() -> pd.DataFrame:
@@ -75,8 +78,16 @@ class SensorFaultDetection(Algorithm):
         samples) off the recording's median by more than the tolerance (fraction) for this long is a rate change.
     mag_norm_tolerance, mag_dip_tolerance_rad, mag_window_s, min_mag_disturbance_s : the field magnitude (or its dip),
         averaged over the window, off the recording's median by more than this fraction (angle) and 6 robust sigmas
-        of its own variation, for this long, is a disturbed field (steel nearby). The tolerances are the heading's
-        (``AttitudeStepHeading``) trust limits.
+        of its own variation, for this long, is a disturbed field (steel nearby). The magnitude tolerance is the
+        heading's (``AttitudeStepHeading``) trust limit. The dip is measured from the apparent vertical, the
+        accelerometer averaged over ``gravity_window_s`` (several steps, so that walking accelerations cancel), and
+        only where that average has the magnitude of g; its tolerance is twice the heading's 10 degrees because a
+        runner leans into a turn by up to about 15 degrees (tan(lean) = v^2 / (r g)), which the apparent vertical
+        follows.
+        With a gyroscope, also: the part of the field's change in the sensor frame that the gyroscope's rotation
+        does not explain (``|dB/dt + w x (B - h)|``, ``h`` the hard-iron offset of an uncalibrated magnetometer fitted
+        by least squares, averaged over the window) above ``mag_rotation_factor`` times its median over the recording
+        (the noise floor of the derivative): this sees steel that keeps |B| and the dip.
     max_speed_mps, gnss_sigma_factor, default_h_acc_m : two fixes are consistent when the distance between them is at
         most ``max_speed_mps`` (a running pedestrian) times their time apart plus ``gnss_sigma_factor`` times their
         combined reported accuracy. The fixes split into runs of consistent fixes; the longest run is trusted, and a
@@ -100,7 +111,8 @@ class SensorFaultDetection(Algorithm):
     def __init__(self, *, gap_factor: float = 5.0, min_gap_s: float = 0.1, stuck_min_s: float = 0.2,
                  duplicate_window_s: float = 1.0, duplicate_min_fraction: float = 0.2, min_saturated_samples: int = 3,
                  rate_tolerance: float = 0.3, rate_window_samples: int = 11, min_rate_change_s: float = 0.5,
-                 mag_norm_tolerance: float = 0.15, mag_dip_tolerance_rad: float = float(np.radians(10.0)), mag_window_s: float = 0.5, min_mag_disturbance_s: float = 0.5,
+                 mag_norm_tolerance: float = 0.15, mag_dip_tolerance_rad: float = float(np.radians(20.0)), mag_window_s: float = 0.5, min_mag_disturbance_s: float = 0.25,
+                 gravity_window_s: float = 2.0, mag_rotation_factor: float = 3.0,
                  max_speed_mps: float = 6.0, gnss_sigma_factor: float = 3.0, default_h_acc_m: float = 5.0,
                  join_s: float = 0.5):
         self.gap_factor = gap_factor
@@ -114,6 +126,8 @@ class SensorFaultDetection(Algorithm):
         self.min_rate_change_s = min_rate_change_s
         self.mag_norm_tolerance = mag_norm_tolerance
         self.mag_dip_tolerance_rad = mag_dip_tolerance_rad
+        self.gravity_window_s = gravity_window_s
+        self.mag_rotation_factor = mag_rotation_factor
         self.mag_window_s = mag_window_s
         self.min_mag_disturbance_s = min_mag_disturbance_s
         self.max_speed_mps = max_speed_mps
@@ -142,7 +156,8 @@ class SensorFaultDetection(Algorithm):
                 if sensor in MIN_FULL_SCALE:
                     rows += self._saturation(t, x, sensor)
                 if sensor == "mag":
-                    rows += self._mag_disturbance(t, x, imu[list(ACC_COLUMNS)].to_numpy(float), med_dt)
+                    gyr = imu[list(GYR_COLUMNS)].to_numpy(float) if all(c in imu.columns for c in GYR_COLUMNS) else None
+                    rows += self._mag_disturbance(t, x, imu[list(ACC_COLUMNS)].to_numpy(float), gyr, med_dt)
         self.gnss_suspect_ = np.zeros(0, bool)
         if gnss is not None:
             suspect, gnss_rows = self._gnss_jumps(gnss)
@@ -237,19 +252,38 @@ class SensorFaultDetection(Algorithm):
                         "message": f"{sensor}: {n} samples clipped at +-{max(levels):.3g} {unit} (sensor range)"})
         return out
 
-    def _mag_disturbance(self, t, x, acc, med_dt) -> list[dict]:
+    def _mag_disturbance(self, t, x, acc, gyr, med_dt) -> list[dict]:
         # The Earth's field has a constant magnitude and a constant dip (angle to the horizontal plane) whatever the
-        # sensor's orientation; steel changes one or both. Gravity's direction: the accelerometer averaged over 1 s.
+        # sensor's orientation; steel changes one or both.
         n_win = int(round(self.mag_window_s / med_dt))
         norm_raw = np.linalg.norm(x, axis=1)
         norm = moving_average(norm_raw, n_win)
-        up = gravity_direction_lowpass(acc, 1.0 / med_dt)
+        up = gravity_direction_lowpass(acc, 1.0 / med_dt, window_s=self.gravity_window_s)
         dip = moving_average(np.arcsin(np.clip(np.einsum("ij,ij->i", x, up) / np.maximum(norm_raw, 1e-9), -1, 1)), n_win)
+        # the averaged accelerometer is gravity only where its magnitude is g (a turn adds a centripetal part)
+        mean_acc = np.linalg.norm(moving_average(acc, int(round(self.gravity_window_s / med_dt))), axis=1)
+        level = np.abs(mean_acc / GRAVITY_MPS2 - 1.0) <= GRAVITY_TOLERANCE
         off = np.zeros(len(t), bool)
-        for signal, floor in ((norm, self.mag_norm_tolerance * float(np.median(norm))), (dip, self.mag_dip_tolerance_rad)):
-            med = float(np.median(signal))
-            sigma = _MAD_TO_SIGMA * float(np.median(np.abs(signal - med)))
-            off |= np.abs(signal - med) > max(floor, 6.0 * sigma)
+        for signal, floor, where in ((norm, self.mag_norm_tolerance * float(np.median(norm)), np.ones(len(t), bool)),
+                                     (dip, self.mag_dip_tolerance_rad, level)):
+            med = float(np.median(signal[where])) if where.any() else 0.0
+            sigma = _MAD_TO_SIGMA * float(np.median(np.abs(signal[where] - med))) if where.any() else 0.0
+            off |= where & (np.abs(signal - med) > max(floor, 6.0 * sigma))
+        if gyr is not None:
+            # A field fixed in the world turns in the sensor frame exactly as the gyroscope says: dB/dt = -w x B.
+            # Walking past steel adds a change the gyroscope does not explain (even one that keeps |B| and the dip).
+            n_short = max(1, int(round(MAG_DERIVATIVE_SMOOTH_S / med_dt)))
+            b = moving_average(x, n_short)
+            w = moving_average(gyr, n_short)
+            residual = np.gradient(b, t, axis=0) + np.cross(w, b)
+            # an uncalibrated magnetometer's hard-iron offset h turns with the sensor: residual = w x h, linear in h
+            skew = np.zeros((len(w), 3, 3))
+            skew[:, 0, 1], skew[:, 0, 2], skew[:, 1, 2] = -w[:, 2], w[:, 1], -w[:, 0]
+            skew[:, 1, 0], skew[:, 2, 0], skew[:, 2, 1] = w[:, 2], -w[:, 1], w[:, 0]
+            hard_iron = np.linalg.lstsq(skew.reshape(-1, 3), residual.reshape(-1), rcond=None)[0]
+            residual -= skew @ hard_iron
+            r = moving_average(np.linalg.norm(residual, axis=1), n_win)
+            off |= r > max(self.mag_rotation_factor * float(np.median(r)), MAG_ROTATION_FLOOR_UTPS)
         med_norm, med_dip = float(np.median(norm)), float(np.median(dip))
         out = []
         for a, b in self._intervals(t, off, self.min_mag_disturbance_s):
