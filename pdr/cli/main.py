@@ -156,12 +156,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("rec")
     p.set_defaults(func=_cmd_evaluate)
 
-    p = sub.add_parser("batch", help="run over many recordings")
+    p = sub.add_parser("batch", help="run over many recordings",
+                       description="pdr run over many recordings: OUT/<recording id>/ each, plus OUT/summary.csv. "
+                                   "A second run skips complete outputs made with the same options.")
     p.add_argument("recs", nargs="+")
     p.add_argument("-o", "--output", required=True)
-    p.add_argument("--engine", choices=("local", "dask"), default="local")
-    p.add_argument("--workers", type=int, default=None)
-    p.add_argument("--scheduler", default=None, help="address of an existing Dask scheduler")
+    p.add_argument("--engine", choices=("local", "dask"), default="local",
+                   help="local process pool (default) or Dask distributed")
+    p.add_argument("--workers", type=int, default=None,
+                   help="worker processes (local pool or the Dask LocalCluster; default: the CPUs available)")
+    p.add_argument("--scheduler", default=None,
+                   help="address of an existing Dask scheduler (tcp://HOST:PORT; with --engine dask)")
     p.add_argument("--config", default=None)
     p.add_argument("--model", default=None)
     p.add_argument("--no-gnss", action="store_true")
