@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy.ndimage import maximum_filter1d
 
 from pdr.cli.main import main
 from pdr.constants import GRAVITY_MPS2
@@ -131,6 +132,22 @@ def test_heel_strikes_are_contacts_and_stance_feet_do_not_slip(steady_walk):
         ts = t_hs + 0.8 * stride
         vs = (kin.joint_positions_m(ts + dt)[f"ankle_{foot}"] - kin.joint_positions_m(ts - dt)[f"ankle_{foot}"]) / (2 * dt)
         assert np.median(np.linalg.norm(vs, axis=1)) > 2.0
+
+
+@pytest.mark.parametrize("speed", [0.8, 1.0])
+def test_a_foot_on_the_ground_never_slides(speed):
+    """Where the straight stance leg is too short for the pelvis path, the heel rises: the foot IMU never translates
+    without turning (it slid up to 3 cm per stride at 3 cm/s: a motion no zero-velocity detector can see), and the
+    thigh and shank stay rigid."""
+    kin = WalkKinematics.steady(speed_mps=speed, duration_s=12.0, seed=1)
+    t = np.arange(2.0, kin.duration_s - 1.0, 0.005)
+    _, w, pos, _ = true_motion(SensorPose(kin, ImuSpec(placement="foot_left", rate_hz=200.0), np.random.default_rng(0)), t)
+    speed_mps = np.linalg.norm(np.gradient(pos, t, axis=0), axis=1)
+    # the foot does not turn for 50 ms (not a turning point of the swing): it must stand
+    still = maximum_filter1d(np.linalg.norm(w, axis=1), 11) < 0.02
+    assert still.mean() > 0.1 and speed_mps[still].max() < 0.003
+    j = kin.joint_positions_m(t)
+    assert np.ptp(np.linalg.norm(j["ankle_left"] - j["knee_left"], axis=1)) < 1e-6
 
 
 def test_running_has_a_flight_phase():

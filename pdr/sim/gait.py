@@ -258,8 +258,11 @@ RUN_DROP_M = 0.05  # running: knee flexion of ~40 deg in mid stance
 RUN_ARC_GAIN = 0.4  # running vertical excursion ~7-9 cm (Cavanagh & Lafortune 1980)
 IMPACT_TAU_S = 0.025  # heel-strike transient at the trunk: u(x) = x^2 exp(-x), x = time since contact / tau
 IMPACT_ACC_MPS2 = (2.0, 1.5)  # its peak vertical acceleration = a + b * speed (m/s²); forward braking half of it
-MAX_REACH = 0.998  # a leg never straightens fully (knee >= ~4 deg); beyond, the foot is pulled in smoothly
+MAX_REACH = 0.998  # a swinging leg never straightens fully (knee >= ~4 deg); beyond, the foot is pulled in smoothly
 REACH_SOFTNESS_M = 0.004  # and over which a leaving foot blends from its stance pose into the swing curves
+MAX_REACH_ROLL_RAD = 0.3  # a planted foot beyond the straight leg's reach rolls forward (heel rise) by at most this
+REACH_ROLL_SLOPE_M = 0.03  # rolling fully replaces the pull when it brings the ankle >= 3 cm nearer the hip per rad
+REACH_ROLL_END = 0.8  # fraction of stance from which push-off takes over (the planted weight is 0 at toe-off)
 
 
 class _BoutCurves:
@@ -317,7 +320,8 @@ class WalkKinematics:
     length and by an envelope that starts and ends each bout from standing. Swing legs follow the curves (forward
     kinematics from the hip). A stance foot rolls without slipping on a circular rocker sole (Hansen, Childress &
     Knox 2004, roll-over shapes) with its pitch from the curves, lying flat from the end of loading to heel rise;
-    the leg reaches it by two-link inverse kinematics (so stance hip and knee angles follow from the geometry).
+    the leg reaches it by two-link inverse kinematics (so stance hip and knee angles follow from the geometry); where
+    the straight leg is too short for the prescribed pelvis, the heel rises earlier (the foot never slides).
     Lift-off and touch-down blend the stance and swing ankle paths in position and velocity. Lateral: pelvis sway
     toward the stance side, feet on lanes half a step width either side of the route.
 
@@ -464,16 +468,63 @@ class WalkKinematics:
         depth = np.maximum(-fk["contact"][..., 1], 0.2)
         return np.arcsin(np.clip((off[f"lane{leg}"] - off[f"lat{leg}"]) / depth, -0.5, 0.5))
 
-    def _anchored(self, t: np.ndarray, st: dict, fk: dict, leg: int, ahead: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    def _anchored(self, t: np.ndarray, st: dict, fk: dict, leg: int, ahead: bool = False,
+                  pitch: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Ankle (s, h above ground) of a foot rolling on its latest footprint (``ahead``: on the next one),
-        settling onto the ground over the first part of stance."""
+        settling onto the ground over the first part of stance; ``pitch``: the foot's pitch (default: the curves')."""
         j = np.searchsorted(self._fp_t[leg], t, side="right") - 1
         if ahead:
             j = np.minimum(j + 1, len(self._fp_t[leg]) - 1)
-        c_s = self._fp_s[leg][j] + self._R * (self._fp_gc[leg][j] - fk["gc"])
-        rel = fk["ankle"] - fk["contact"]  # ankle relative to the contact point
+        gam = fk["gamma"] if pitch is None else pitch
+        gc = np.clip(gam, self._g_toe, self._g_heel)
+        c_s = self._fp_s[leg][j] + self._R * (self._fp_gc[leg][j] - gc)
+        rel = -_rot2(gam, self._C + self._R * np.stack([-np.sin(gc), -np.cos(gc)], -1))  # ankle - contact point
         settle = np.ones_like(t) if ahead else 1.0 - _smoothstep(fk["p"] / TOUCH_DOWN_PHASE)
         return c_s + rel[..., 0], rel[..., 1] + self._fp_dh[leg][j] * settle
+
+    def _rolled_in_reach(self, t: np.ndarray, st: dict, fk: dict, leg: int, hip: np.ndarray, lane: np.ndarray,
+                         planted: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """A foot on the ground that the leg cannot reach rolls forward instead of sliding.
+
+        The stance leg straightens fully (the knee of a swinging leg keeps ~4 deg); where the hip has moved so far
+        ahead that even the straight leg is too short, the foot rolls forward on its sole (an earlier, larger heel
+        rise) until the ankle is within reach. The segments stay rigid and the contact point does not slip; before,
+        the two-link leg dragged the flat foot along the ground (up to 3 cm per stride at 0.8-1.0 m/s, at up to
+        3 cm/s with no rotation, which no zero-velocity detector can see). Returns the ankle (s, h) on the latest
+        footprint, the pitch change (<= 0: toe down) and the hip-ankle distance the leg takes. ``planted`` (0-1)
+        weighs the roll (0 in the air). Newton steps on the pitch; where rolling hardly brings the ankle nearer
+        the hip (hip above or behind the contact, at heel strike) the foot rolls proportionally less and the leg
+        pulls the rest in (a slip of a few mm while the foot settles)."""
+        a_s, a_h = self._anchored(t, st, fk, leg)
+        lat2 = (lane - hip[:, 1]) ** 2
+
+        def dist(d):
+            s_, h_ = self._anchored(t, st, fk, leg, pitch=fk["gamma"] + d)
+            return np.sqrt((s_ - hip[:, 0]) ** 2 + lat2 + (h_ - hip[:, 2]) ** 2), s_, h_
+
+        d0 = np.sqrt((a_s - hip[:, 0]) ** 2 + lat2 + (a_h - hip[:, 2]) ** 2)
+        leg_m = self.body.thigh_m + self.body.shank_m
+        reach = leg_m - _straight_margin(d0, leg_m)  # a planted leg may straighten fully
+        delta = np.zeros_like(t)
+        todo = (planted > 0) & (d0 - reach > 1e-6)
+        if not todo.any():
+            return a_s, a_h, delta, reach
+        eps = 1e-4
+        slope0 = (dist(delta + eps)[0] - dist(delta - eps)[0]) / (2 * eps)  # > 0: rolling forward brings it nearer
+        for _ in range(8):
+            slope = (dist(delta + eps)[0] - dist(delta - eps)[0]) / (2 * eps)
+            f0 = dist(delta)[0] - reach
+            ok = todo & (slope > 1e-3)
+            step = np.where(ok, -f0 / np.where(ok, slope, 1.0), 0.0)
+            delta = np.where(ok, np.clip(delta + np.clip(step, -0.2, 0.2), -3 * MAX_REACH_ROLL_RAD, 0.0), delta)
+            todo = ok & (np.abs(f0) > 1e-7)
+            if not todo.any():
+                break
+        # less where rolling hardly helps; saturating smoothly at MAX_REACH_ROLL_RAD
+        delta = MAX_REACH_ROLL_RAD * np.tanh(delta * _smoothstep(slope0 / REACH_ROLL_SLOPE_M) / MAX_REACH_ROLL_RAD)
+        delta = planted * delta
+        _, a_s, a_h = dist(delta)
+        return a_s, a_h, delta, reach
 
     def _pelvis_h(self, t: np.ndarray, st: dict) -> np.ndarray:
         """Pelvis height above the ground: standing hip height, lowered while walking by an inverted-pendulum
@@ -510,7 +561,10 @@ class WalkKinematics:
             hip = np.stack([ps + off[f"fwd{leg}"], off[f"lat{leg}"], ph + off[f"up{leg}"]], -1)
             p, stance = fk["p"], fk["stance"]
             in_stance = p <= stance
-            a_s, a_h = self._anchored(t, st, fk, leg)
+            # weight of a foot held on the ground: from touch-down (settled) to late stance (push-off takes over)
+            planted = _smoothstep(p / TOUCH_DOWN_PHASE) * \
+                (1.0 - _smoothstep((p / stance - REACH_ROLL_END) / (1.0 - REACH_ROLL_END)))
+            a_s, a_h, d_roll, reach = self._rolled_in_reach(t, st, fk, leg, hip, off[f"lane{leg}"], planted)
             # swing: the curves' ankle from the hip, blended (position and velocity) from the foot still rolling
             # on its toe at lift-off, and into the next footprint before touch-down
             tilt = np.cos(self._tilt(fk, off, leg))
@@ -525,8 +579,8 @@ class WalkKinematics:
                 sw_s = land * n_s + (1 - land) * sw_s
                 sw_h = land * n_h + (1 - land) * sw_h
             ankle = np.stack([np.where(in_stance, a_s, sw_s), off[f"lane{leg}"], np.where(in_stance, a_h, sw_h)], -1)
-            knee, ankle = _two_link(hip, ankle, b.thigh_m, b.shank_m)
-            gam = fk["gamma"]
+            knee, ankle = _two_link(hip, ankle, b.thigh_m, b.shank_m, planted=planted, reach_m=reach)
+            gam = fk["gamma"] + d_roll
             out[f"hip_{side}"], out[f"knee_{side}"], out[f"ankle_{side}"] = hip, knee, ankle
             for name, pt in (("heel", self._heel_f), ("toe", self._toe_f)):
                 d = _rot2(gam, np.broadcast_to(pt, (len(t), 2)))
@@ -632,14 +686,26 @@ def _rot2(angle: np.ndarray, pt: np.ndarray) -> np.ndarray:
     return np.stack([c * pt[..., 0] - s * pt[..., 1], s * pt[..., 0] + c * pt[..., 1]], -1)
 
 
-def _two_link(hip: np.ndarray, ankle: np.ndarray, l1: float, l2: float) -> np.ndarray:
+def _straight_margin(dist: np.ndarray, leg_m: float) -> np.ndarray:
+    """How much shorter than the full leg a planted leg stays: a smooth max(leg - dist, 0) at 1 mm scale."""
+    return 1e-3 * np.logaddexp(0.0, (leg_m - dist) / 1e-3)
+
+
+def _reach_pull(dist: np.ndarray, leg_m: float) -> np.ndarray:
+    """How far the leg pulls in a target ``dist`` from the hip: a smooth max(dist - reach, 0)."""
+    return REACH_SOFTNESS_M * np.logaddexp(0.0, (dist - leg_m * MAX_REACH) / REACH_SOFTNESS_M)
+
+
+def _two_link(hip: np.ndarray, ankle: np.ndarray, l1: float, l2: float, planted: np.ndarray | float = 0.0,
+              reach_m: np.ndarray | float = np.inf) -> np.ndarray:
     """Knee position reaching from hip toward the ankle target with segment lengths l1, l2, bending forward
-    (path coordinates), and the ankle actually reached (the target pulled in when it is out of reach)."""
+    (path coordinates), and the ankle actually reached: a target out of reach is pulled in smoothly; a foot on the
+    ground (weight ``planted``, 0-1) only as far as needed to be ``reach_m`` from the hip (it has rolled towards the
+    hip already: ``WalkKinematics._rolled_in_reach``)."""
     d = ankle - hip
     dist = np.linalg.norm(d, axis=-1)
-    reach = (l1 + l2) * MAX_REACH
-    soft = REACH_SOFTNESS_M * np.logaddexp(0.0, (dist - reach) / REACH_SOFTNESS_M)  # smooth max(dist - reach, 0)
-    dist_c = np.maximum(dist - soft, abs(l1 - l2) + 1e-6)
+    free = dist - _reach_pull(dist, l1 + l2)
+    dist_c = np.maximum((1.0 - planted) * free + planted * np.minimum(dist, reach_m), abs(l1 - l2) + 1e-6)
     u = d / np.maximum(dist, 1e-9)[:, None]
     cos_a = np.clip((l1**2 + dist_c**2 - l2**2) / (2 * l1 * dist_c), -1.0, 1.0)
     fwd = np.array([1.0, 0.0, 0.0])
