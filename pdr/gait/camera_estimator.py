@@ -385,7 +385,7 @@ def project_points(state: np.ndarray, form: np.ndarray, points_m: np.ndarray, te
     dpc = np.zeros(dx.shape + (3, 10))
     dpc[..., :4] = np.einsum("bnik,bij->bnjk", dq, r_bc)  # R_bc^T dq
     dpc[..., 3] += q @ dr_bc  # dR_bc^T q
-    # camera perturbed by rotation w and translation t (camera axes): pc' = pc - w x pc - t
+    # pose error, camera axes: the scene turned by a small rotation w and the camera moved by t: pc' = pc + w x pc - t
     px, py, pz = pc[..., 0], pc[..., 1], pc[..., 2]
     dpc[..., 0, 5], dpc[..., 0, 6] = pz, -py
     dpc[..., 1, 4], dpc[..., 1, 6] = -pz, px
@@ -429,26 +429,21 @@ def joint_positions(state: np.ndarray, form: np.ndarray, templates: FourierFormT
 
 
 def predict(state: np.ndarray, cov: np.ndarray, form: np.ndarray, dt_s: float, templates: FourierFormTemplates,
-            process_std: np.ndarray, cadence_tau_s: float = np.inf):
+            process_std: np.ndarray):
     """State prediction g (eq. 1, 4, 5) over ``dt_s`` in the given forms, its Jacobian G and the predicted
     covariance (eq. 9). ``process_std``: white-noise densities of (x, y, heading, phase, phase rate) per sqrt(s),
-(5,) or per candidate (B, 5).
-    ``cadence_tau_s``: the phase rate relaxes toward the form's cadence with this time constant (inf: eq. 5,
-    a constant phase rate)."""
+(5,) or per candidate (B, 5)."""
     x, y, xi, eta, rate = state.T
     rho = templates.evaluate(form, eta)[:, _P["rho_m_per_rad"]]
     drho = templates.evaluate(form, eta, derivative=True)[:, _P["rho_m_per_rad"]]
     step = rho * rate * dt_s
     c, s = np.cos(xi), np.sin(xi)
-    a = dt_s / cadence_tau_s
-    out = np.stack([x + step * c, y + step * s, xi, eta + rate * dt_s,
-                    rate + a * (templates.phase_rate_radps_[form] - rate)], -1)
+    out = np.stack([x + step * c, y + step * s, xi, eta + rate * dt_s, rate], -1)
     g = np.broadcast_to(np.eye(5), (len(state), 5, 5)).copy()
     g[:, 0, 2], g[:, 1, 2] = -step * s, step * c
     g[:, 0, 3], g[:, 1, 3] = drho * rate * dt_s * c, drho * rate * dt_s * s
     g[:, 0, 4], g[:, 1, 4] = rho * dt_s * c, rho * dt_s * s
     g[:, 3, 4] = dt_s
-    g[:, 4, 4] = 1.0 - a
     p_std = np.broadcast_to(process_std, (len(state), 5))
     cov_bar = g @ cov @ np.swapaxes(g, 1, 2) + np.einsum("bi,ij->bij", p_std**2 * dt_s, np.eye(5))
     return out, cov_bar, g
@@ -504,6 +499,9 @@ class WearableCameraGaitEstimation:
         mean re-projection error of a correct candidate. The paper set sigma^2 = 10 px^2, nu = 0 for its camera
         and gaits; on the simulated walks here the stored forms leave a mean error of about 8-10 px (1-sigma
         spread ~8 px) at the true state, from stride-to-stride variability, so sigma = 8 px.
+    error_correlation_s : that error belongs to the step, not to the frame: it persists for about this long, so
+        lambda is counted once per this time (log lambda x frame time / correlation time; 0: every frame, as the
+        paper at 250 fps).
     mean_form_duration_s : sets the bonus C for staying in a form (eq. 6) as the prior odds of staying rather than
         changing in one frame: C = mean form duration x frame rate (a form lasts seconds, a frame 1/fps).
     pixel_std_px : independent noise of one image point in the EKF (Q of eq. 10): corner detection.
@@ -514,10 +512,15 @@ class WearableCameraGaitEstimation:
         outlier (a mismatched corner): capped in eq. 7 and left out of the update.
     position_noise_mps, heading_noise_radps, phase_noise_radps : process noise P (eq. 9) as white-noise
         densities (per sqrt(s)) of x/y, heading and phase.
-    cadence_tau_s, cadence_std_fraction : the phase rate is an Ornstein-Uhlenbeck process about the cadence of the
-        candidate's form (a form is a way of walking, its cadence part of it): it relaxes toward it with this
-        time constant and strays from it by this fraction (1-sigma, stationary; per-step timing and speeds
-        between the stored ones). ``cadence_tau_s = inf`` would be the paper's constant rate (eq. 5).
+    phase_rate_noise_radps2 : process noise of the phase rate (random walk, eq. 5 + noise): cadence changes of
+        about 1 rad/s over a step when the form changes.
+    cadence_std_fraction, cadence_tau_s : the weight of a candidate (eq. 6) is multiplied by a cadence factor
+        kappa, the Gaussian of its phase rate about its form's cadence with this relative spread (per-step timing,
+        speeds between the stored ones), counted once per ``cadence_tau_s`` (the rate is correlated over about a
+        step). 0: off, the paper's weight. The image alone tells nearby forms apart poorly (a wrong form's pose is
+        absorbed by a shifted phase); the cadence, part of what a form is (the paper's Fig. 9: the forms' periods
+        differ), does. The phase rate itself follows the images (eq. 5), so that kappa judges the data, not a
+        prior.
     initial_position_std_m, initial_heading_std_rad : uncertainty of the start pose given to :meth:`estimate`
         (and of the pose kept when the track is lost).
     lost_error_sigmas, lost_frames : the track is lost when the best candidate's mean re-projection error after
@@ -559,12 +562,14 @@ class WearableCameraGaitEstimation:
 
     def __init__(self, *, templates: FourierFormTemplates, camera: ThighCameraModel, n_candidates: int = 8, max_points: int = 60,
                  n_initial_phases: int = 16, keep_every_form: bool = True, likelihood_sigma_px: float = 8.0,
+                 error_correlation_s: float = 0.1,
                  likelihood_mean_px: float = 0.0, mean_form_duration_s: float = 3.0, pixel_std_px: float = 1.5,
                  template_rotation_std_deg: float = 3.0, template_position_std_m: float = 0.01,
                  gate_px: float = 12.0, position_noise_mps: float = 0.1, heading_noise_radps: float = 0.5,
-                 phase_noise_radps: float = 0.3, cadence_std_fraction: float = 0.08, cadence_tau_s: float = 0.5,
+                 phase_noise_radps: float = 0.3, phase_rate_noise_radps2: float = 1.0,
+                 cadence_std_fraction: float = 0.08, cadence_tau_s: float = 0.5,
                  initial_position_std_m: float = 0.2, initial_heading_std_rad: float = 0.15,
-                 lost_error_sigmas: float = 3.0, lost_frames: int = 5):
+                 lost_error_sigmas: float = 4.0, lost_frames: int = 5):
         self.templates = templates
         self.camera = camera
         self.n_candidates = n_candidates
@@ -573,6 +578,7 @@ class WearableCameraGaitEstimation:
         self.keep_every_form = keep_every_form
         self.likelihood_sigma_px = likelihood_sigma_px
         self.likelihood_mean_px = likelihood_mean_px
+        self.error_correlation_s = error_correlation_s
         self.mean_form_duration_s = mean_form_duration_s
         self.pixel_std_px = pixel_std_px
         self.template_rotation_std_deg = template_rotation_std_deg
@@ -581,6 +587,7 @@ class WearableCameraGaitEstimation:
         self.position_noise_mps = position_noise_mps
         self.heading_noise_radps = heading_noise_radps
         self.phase_noise_radps = phase_noise_radps
+        self.phase_rate_noise_radps2 = phase_rate_noise_radps2
         self.cadence_std_fraction = cadence_std_fraction
         self.cadence_tau_s = cadence_tau_s
         self.initial_position_std_m = initial_position_std_m
@@ -617,10 +624,22 @@ class WearableCameraGaitEstimation:
         rest = order[~np.isin(order, best_each)]
         return np.concatenate([best_each, rest])[: max(self.n_candidates, len(best_each))]
 
+    def _log_kappa(self, rate, form, dt_s):
+        """log of the cadence factor kappa: the candidate's phase rate against its form's cadence (Gaussian,
+        ``cadence_std_fraction``), counted once per ``cadence_tau_s`` (the rate is correlated over that
+        time, so each frame carries dt / tau of it)."""
+        if not self.cadence_std_fraction:
+            return 0.0
+        nominal = self.templates.phase_rate_radps_[form]
+        z = (rate - nominal) / (self.cadence_std_fraction * nominal)
+        return -0.5 * z * z * (dt_s / self.cadence_tau_s)
+
     def _log_lambda(self, capped_err):
-        """log of eq. 7 (without the constant): mean capped re-projection error per candidate."""
+        """log of eq. 7 (without the constant): mean capped re-projection error per candidate, counted once per
+        ``error_correlation_s``."""
         e = capped_err.mean(axis=1)
-        return -((e - self.likelihood_mean_px) ** 2) / (2.0 * self.likelihood_sigma_px**2)
+        per_frame = max(self.error_correlation_s * self.camera.fps, 1.0)
+        return -((e - self.likelihood_mean_px) ** 2) / (2.0 * self.likelihood_sigma_px**2) / per_frame
 
     def estimate(self, frames: pd.DataFrame, observations: pd.DataFrame, points: pd.DataFrame, *, initial_e_m: float,
                  initial_n_m: float, initial_heading_rad: float) -> "WearableCameraGaitEstimation":
@@ -668,10 +687,8 @@ class WearableCameraGaitEstimation:
         t0 = time.perf_counter()
         n_forms = len(tp.forms_)
         log_c = float(np.log(max(self.mean_form_duration_s * self.camera.fps, 1.0)))
-        pstd = np.tile([self.position_noise_mps, self.position_noise_mps, self.heading_noise_radps,
-                        self.phase_noise_radps, 0.0], (n_forms, 1))
-        # OU stationary variance s^2 = q^2 tau / 2  ->  q = s sqrt(2 / tau)
-        pstd[:, 4] = self.cadence_std_fraction * tp.phase_rate_radps_ * np.sqrt(2.0 / self.cadence_tau_s)
+        pstd = np.array([self.position_noise_mps, self.position_noise_mps, self.heading_noise_radps,
+                         self.phase_noise_radps, self.phase_rate_noise_radps2])
         allowed = tp.transitions_ | np.eye(n_forms, dtype=bool)
         out_state = np.zeros((len(t), 5))
         out_form = np.zeros(len(t), int)
@@ -701,8 +718,9 @@ class WearableCameraGaitEstimation:
                 else:  # no evidence to change form: predict only
                     parent, child = np.arange(len(form)), form
                     n_pred_only += 1
-                s_bar, c_bar, _ = predict(state[parent], cov[parent], child, dt, tp, pstd[child], self.cadence_tau_s)
+                s_bar, c_bar, _ = predict(state[parent], cov[parent], child, dt, tp, pstd)
                 lw = logw[parent] + log_c * (child == form[parent])
+                lw = lw + self._log_kappa(s_bar[:, 4], child, dt)
                 if enough:
                     _, _, err, _ = self._residuals(s_bar, child, pts, uv, jacobian=False)
                     lw = lw + self._log_lambda(err)
@@ -724,7 +742,9 @@ class WearableCameraGaitEstimation:
                 lost = lost + 1 if not out_err[i] <= self.lost_error_sigmas * self.likelihood_sigma_px else 0
                 if lost >= self.lost_frames:  # track lost: search phase and form again around the pose
                     b = state[best]
-                    state, cov, form, logw = self._initial(pts, uv, b[0], b[1], b[2])
+                    memory = np.full(n_forms, logw.min() - log_c)  # the forms' weights so far are kept
+                    np.maximum.at(memory, form, logw)
+                    state, cov, form, logw = self._initial(pts, uv, b[0], b[1], b[2], b[4], memory)
                     logw = logw - logw.max()
                     best, lost = 0, 0
                     n_relocalised += 1
@@ -749,18 +769,19 @@ class WearableCameraGaitEstimation:
         self.cycles_ = cycles_from_phase(t, out_state[:, 3], self.states_["form"].to_numpy())
         return self
 
-    def _initial(self, pts, uv, e0, n0, psi0):
-        """Candidates on a grid of phases in every form at the start pose, each corrected by two iterated updates,
-        weighted by eq. 7 on the corrected errors; the best ``n_candidates`` are kept."""
+    def _initial(self, pts, uv, e0, n0, psi0, rate0=None, log_prior=None):
+        """Candidates on a grid of phases in every form at the start pose (with the forms' cadences, or
+        ``rate0``), each corrected by three iterated updates, weighted by eq. 7 on the corrected errors (plus the
+        forms' ``log_prior``); the best ``n_candidates`` are kept."""
         tp = self.templates
         n_forms, n_ph = len(tp.forms_), self.n_initial_phases
         form = np.repeat(np.arange(n_forms), n_ph)
         eta = np.tile(TWO_PI * np.arange(n_ph) / n_ph, n_forms)
-        state = np.stack([np.full(len(form), e0), np.full(len(form), n0), np.full(len(form), psi0), eta,
-                          tp.phase_rate_radps_[form]], -1)
+        rate = tp.phase_rate_radps_[form] if rate0 is None else np.full(len(form), rate0)
+        state = np.stack([np.full(len(form), e0), np.full(len(form), n0), np.full(len(form), psi0), eta, rate], -1)
         std = np.stack([np.full(len(form), self.initial_position_std_m), np.full(len(form), self.initial_position_std_m),
                         np.full(len(form), self.initial_heading_std_rad), np.full(len(form), np.pi / n_ph),
-                        self.cadence_std_fraction * tp.phase_rate_radps_[form]], -1)
+                        0.25 * tp.phase_rate_radps_[form]], -1)
         cov0 = np.einsum("bi,ij->bij", std**2, np.eye(5))
         s = state
         for _ in range(3):  # iterated EKF (Gauss-Newton on the prior + points)
@@ -768,8 +789,8 @@ class WearableCameraGaitEstimation:
             res = res + np.einsum("bnik,bk->bni", jac[0], s - state)
             s, cov = self._update(state, cov0, res, jac, inl)
         res, jac, err, inl = self._residuals(s, form, pts, uv)
-        lw = self._log_lambda(err)
-        keep = np.argsort(-lw, kind="stable")[: self.n_candidates]
+        lw = self._log_lambda(err) + (0.0 if log_prior is None else log_prior[form])
+        keep = self._resample(lw, form)
         return s[keep], cov[keep], form[keep], lw[keep]
 
     def _empty(self):
