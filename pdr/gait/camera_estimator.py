@@ -545,12 +545,26 @@ class WearableCameraGaitEstimation:
     after it (Sec. 5.2); each trial is predicted with that form's template, eq. 1 for the position and heading with
     the speed = path advance per radian x phase rate, eq. 5 for the phase, and the covariance by eq. 9 (Sec. 5.3);
     its weight is w = C lambda w_prev (eq. 6) with lambda the Gaussian of the mean re-projection error of the
-    observed points (eq. 7); the ``n_candidates`` heaviest trials are kept (resampling, Sec. 5.4) and each is
-    corrected by the EKF (eq. 10-11) with the analytic Jacobian of the pinhole projection. The output is the
-    heaviest candidate. Deviations, each for a reason: outlier gating (the paper had none: its correspondences
-    came from a clean chessboard); the information form of eq. 10 (fewer operations, same result); the unknown
-    initial phase is searched on a grid with one iterated update per trial (the paper does not say how it starts);
-    the heading has no turn template (turns are followed through the process noise and the camera).
+    observed points (eq. 7); the heaviest trials are kept (resampling, Sec. 5.4) and each is corrected by the EKF
+    (eq. 10-11) with the analytic Jacobian of the pinhole projection. The output is the heaviest candidate.
+
+    Deviations, each for a reason found on the simulated walks (where the stored gait of a form misses a given
+    step by a few degrees of thigh angle, 10-20 px):
+
+    - Q of eq. 10 holds, besides the pixel noise, one camera pose error shared by all points of a frame. With
+      independent pixel noise only, sixty points overrule the gait model and the state bends to fit each step.
+    - lambda (eq. 7) is counted once per ``error_correlation_s`` and the weight has a cadence factor kappa
+      (w = C lambda kappa w_prev): a wrong form's pose is absorbed by a shifted phase within a few frames, so
+      per-frame image evidence alone flips between neighbouring forms; the phase rate, followed freely by
+      the images (eq. 5), tells them apart.
+    - resampling keeps the heaviest candidate of every form (``keep_every_form``); a lost track (error
+      above ``lost_error_sigmas`` x sigma for ``lost_frames`` frames) is searched again over phase and form
+      around the current pose, keeping the forms' weights. Near the turning points of the thigh swing the phase
+      is locally unobservable and a lagging phase can be held there by the update.
+    - outlier gating (the paper had clean chessboard correspondences); the information form of eq. 10 (fewer
+      operations, same result); the unknown initial phase is searched on a grid with three iterated updates per
+      trial (the paper does not say how it starts); the heading has no turn template (turns are followed through
+      the process noise and the camera).
 
     Example
     -------
