@@ -7,7 +7,7 @@ import pandas as pd
 import pytest
 
 from pdr.constants import GRAVITY_MPS2
-from pdr.heading import walking_direction
+from pdr.heading import gait_phase_sign, walking_direction
 from pdr.heading.step_heading import wrap
 from pdr.io.recording import Recording
 from pdr.pipelines.steps import detect_steps
@@ -114,3 +114,63 @@ def test_no_gyro_heading_change_zero_with_large_std():
     with pytest.warns(UserWarning, match="no gyroscope"):
         table = detect_steps(Recording(meta={"recording": {"id": "ng", "placement": "hand"}}, imu=imu), {})
     assert (table.heading_change_rad == 0).all() and (table.heading_change_std_rad >= 1.0).all()
+
+
+def running_stretch(direction: float, *, rate: float = 100.0, step_hz: float = 2.8, duration_s: float = 6.0,
+                    duty: float = 0.6) -> np.ndarray:
+    """Earth-frame acceleration (gravity removed) of a spring-mass run: in each step a stance of ``duty`` of the step
+    with a half-sine vertical force (mean 1 g over the step) and braking then propulsion, then a flight at 0 g."""
+    t = np.arange(0, duration_s, 1 / rate)
+    ph = (t * step_hz) % 1.0
+    stance = ph < duty
+    fz = np.where(stance, np.pi / (2 * duty) * np.sin(np.pi * ph / duty), 0.0) * GRAVITY_MPS2
+    fwd = np.where(stance, -3.0 * np.sin(2 * np.pi * ph / duty), 0.0)  # braking first half of stance, then propulsion
+    lat = 0.7 * np.sin(np.pi * step_hz * t)
+    return np.column_stack([fwd * np.cos(direction) - lat * np.sin(direction),
+                            fwd * np.sin(direction) + lat * np.cos(direction), fz - GRAVITY_MPS2])
+
+
+@pytest.mark.parametrize("direction", [0.3, 2.0, -2.5])
+def test_walking_direction_of_a_run_with_a_flight_phase(direction):
+    """Running reverses the walking phase relation (the forward acceleration lags the vertical one by a quarter
+    step); the flight phase (0 g) tells the two gaits apart, so a run does not point backwards (issue 3)."""
+    rate, step_hz = 100.0, 2.8
+    a = running_stretch(direction, rate=rate, step_hz=step_hz)
+    assert (gait_phase_sign(a[:, 2], rate, 1 / step_hz) == -1.0).all()
+    d, quality = walking_direction(a, rate, 1 / step_hz)
+    assert wrap(d - direction) == pytest.approx(0.0, abs=0.1)
+    assert quality > 0.3
+
+
+def test_gait_phase_sign_walking_and_in_between():
+    rate, step_hz = 100.0, 1.8
+    t = np.arange(0, 4, 1 / rate)
+    walk = -0.3 * GRAVITY_MPS2 * np.cos(2 * np.pi * step_hz * t)  # vertical specific force 0.7-1.3 g: no flight
+    assert (gait_phase_sign(walk, rate, 1 / step_hz) == 1.0).all()
+    unsure = -0.675 * GRAVITY_MPS2 * np.cos(2 * np.pi * step_hz * t)  # trough at 0.325 g: half-way, no vote
+    assert np.abs(gait_phase_sign(unsure, rate, 1 / step_hz)[50:-50]).max() < 0.1
+
+
+def test_run_inside_a_walk_keeps_the_heading():
+    """A waist IMU walking, running at 3 m/s, walking again along an L-shaped route (``pdr simulate``): the heading
+    of every step, running ones included, within 30 degrees of the truth and the running steps' median within 6
+    degrees (before the flight-phase rule the running steps pointed backwards, 175 degrees off)."""
+    from pdr.sim import simulate
+
+    rec = simulate({"route": {"waypoints_m": [[0.0, 0.0], [60.0, 0.0], [60.0, 80.0]], "loop": False},
+                    "segment": [{"duration_s": 2.0, "speed_mps": 0.0}, {"duration_s": 20.0, "speed_mps": 1.3},
+                                {"duration_s": 20.0, "speed_mps": 3.0}, {"duration_s": 20.0, "speed_mps": 1.3},
+                                {"duration_s": 2.0, "speed_mps": 0.0}],
+                    "imu": [{"placement": "waist", "rate_hz": 100.0, "magnetometer": False}],
+                    "gnss": {"enabled": False}}, seed=1)
+    table = detect_steps(rec, {})
+    ref, ref_steps = rec.reference["trajectory"], rec.reference["steps"]
+    t = table.t_s.to_numpy()
+    truth = np.interp(t, ref.t_s, np.unwrap(ref.heading_rad))
+    speed = ref_steps.speed_mps.to_numpy()[np.clip(np.searchsorted(ref_steps.t_s, t), 0, len(ref_steps) - 1)]
+    running = speed > 2.2
+    assert running.sum() > 40 and (~running).sum() > 40
+    diff = table.heading_rad.to_numpy() - truth
+    err = np.abs(wrap(diff - np.angle(np.mean(np.exp(1j * diff[~running])))))  # the 6D frame's yaw zero is arbitrary
+    assert np.degrees(err.max()) < 30.0
+    assert np.degrees(np.median(err[running])) < 6.0

@@ -7,11 +7,23 @@ import warnings
 import numpy as np
 import pandas as pd
 from scipy import signal
+from scipy.ndimage import minimum_filter1d
 
 from pdr.base import Algorithm
+from pdr.constants import GRAVITY_MPS2
 from pdr.errors import InputError
 from pdr.signals.attitude import Attitude, earth_acceleration, rotate, yaw_increments
 from pdr.signals.resample import UniformImu
+
+# Gait of each stretch from the vertical specific force (in g) over one step. Walking is an inverted pendulum: the
+# trunk vaults over the stance leg and its vertical specific force bottoms out at g (1 - v^2 / (g L)), about 0.5 g at
+# the walk-run transition (Froude number 0.5), a little less at the pelvis (its own excursion); a foot is always on
+# the ground. Running is a bouncing spring-mass gait with a flight phase, where the body is in free fall and the
+# specific force is near 0 g (soft tissue and the low-pass leave a trough of 0.1-0.3 g). Between the two bounds the
+# sign of the phase relation fades linearly, so an ambiguous stretch gives a weak, not a wrong, vote.
+FLIGHT_MAX_SPECIFIC_FORCE_G = 0.25
+WALK_MIN_SPECIFIC_FORCE_G = 0.40
+VERTICAL_LOWPASS_HZ = 10.0  # keeps the flight trough (~0.1 s), drops the heel-strike ringing
 
 HEADING_COLUMNS = ["heading_rad", "heading_change_rad", "heading_change_std_rad", "mag_heading_rad", "mag_heading_std_rad"]
 
@@ -31,10 +43,34 @@ def _bandpass(acc_enu: np.ndarray, rate_hz: float, step_s: float) -> np.ndarray 
     return signal.sosfiltfilt(sos, acc_enu, axis=0)
 
 
-def _products(a: np.ndarray, q: int) -> np.ndarray:
-    """Per-sample products whose window sums give the direction: ee, nn, en, vv, e(t) v(t+q), n(t) v(t+q)."""
+def gait_phase_sign(acc_up_mps2: np.ndarray, rate_hz: float, step_s: float, *,
+                    flight_max_g: float = FLIGHT_MAX_SPECIFIC_FORCE_G,
+                    walk_min_g: float = WALK_MIN_SPECIFIC_FORCE_G) -> np.ndarray:
+    """Per sample, the sign of the forward-vertical phase relation: +1 walking, -1 running (a flight phase), between.
+
+    ``acc_up_mps2`` is the earth-frame vertical acceleration with gravity removed (:func:`earth_acceleration`).
+    The vertical specific force is low-passed (``VERTICAL_LOWPASS_HZ``) and its minimum taken over one step centred
+    on each sample: at or below ``flight_max_g`` (in g) the stretch holds a flight phase (-1), at or above
+    ``walk_min_g`` it does not (+1), linear in between (see the constants above for the physics).
+    """
+    fz = (np.asarray(acc_up_mps2, float) + GRAVITY_MPS2) / GRAVITY_MPS2
+    if len(fz) == 0:
+        return np.ones(0)
+    fc = min(VERTICAL_LOWPASS_HZ, 0.4 * rate_hz)
+    if len(fz) > 15:
+        fz = signal.sosfiltfilt(signal.butter(2, fc / (0.5 * rate_hz), output="sos"), fz)
+    lowest = minimum_filter1d(fz, size=max(1, int(round(step_s * rate_hz))), mode="nearest")
+    mid, half = 0.5 * (flight_max_g + walk_min_g), 0.5 * (walk_min_g - flight_max_g)
+    return np.clip((lowest - mid) / max(half, 1e-9), -1.0, 1.0)
+
+
+def _products(a: np.ndarray, q: int, sign: np.ndarray | None = None) -> np.ndarray:
+    """Per-sample products whose window sums give the direction: ee, nn, en, vv, s e(t) v(t+q), s n(t) v(t+q)
+    (``s``: :func:`gait_phase_sign`, 1 if None)."""
     e, n, v = a[:, 0], a[:, 1], a[:, 2]
     v_adv = np.concatenate([v[q:], np.zeros(q)])
+    if sign is not None:
+        v_adv = v_adv * sign
     return np.column_stack([e * e, n * n, e * n, v * v, e * v_adv, n * v_adv])
 
 
@@ -59,15 +95,21 @@ def walking_direction(acc_enu: np.ndarray, rate_hz: float, step_s: float) -> tup
 
     The horizontal acceleration band-passed around the step frequency oscillates along the direction of travel
     (the antero-posterior component repeats every step, the medio-lateral one every stride). Its principal axis gives
-    the direction up to 180 degrees; the sign follows from the inverted-pendulum phase relation: the forward
-    acceleration leads the vertical acceleration by a quarter step (it peaks before the vertical peak at double
-    support and turns negative, braking, after it). Quality in [0, 1]: the principal axis' share of the
-    horizontal variance times the normalised quarter-step correlation.
+    the direction up to 180 degrees; the sign follows from the phase relation of the gait. Walking (inverted
+    pendulum): the forward acceleration leads the vertical acceleration by a quarter step (it peaks before the
+    vertical peak at double support and turns negative, braking, after it, while the trunk vaults up). Running
+    (spring-mass, with a flight phase): the vertical peak is mid-stance, braking comes before it and propulsion
+    after, so the forward acceleration lags the vertical by a quarter step. The gait is told apart per sample by the
+    flight phase (:func:`gait_phase_sign`). Quality in [0, 1]: the principal axis' share of the horizontal variance
+    times the normalised quarter-step correlation.
     """
-    a = _bandpass(np.asarray(acc_enu, float), rate_hz, step_s)
+    acc_enu = np.asarray(acc_enu, float)
+    a = _bandpass(acc_enu, rate_hz, step_s)
     if a is None:
         return float("nan"), 0.0
-    d, q = _direction(_products(a, int(round(0.25 * step_s * rate_hz))).sum(axis=0)[None, :], np.array([len(a)]))
+    sign = gait_phase_sign(acc_enu[:, 2], rate_hz, step_s)
+    d, q = _direction(_products(a, int(round(0.25 * step_s * rate_hz)), sign).sum(axis=0)[None, :],
+                      np.array([len(a)]))
     return float(d[0]), float(q[0])
 
 
@@ -96,19 +138,25 @@ class AttitudeStepHeading(Algorithm):
     mag_norm_tolerance : a magnetic sample is trusted when |B| is within this fraction of the recording's median.
     mag_dip_tolerance_rad : ... and its dip within this of the median dip.
     mag_heading_std_rad : std of a trusted magnetic heading.
+    flight_max_specific_force_g, walk_min_specific_force_g : a stretch whose vertical specific force (low-passed)
+        drops to the first within a step has a flight phase (running); one that stays above the second is walking
+        (:func:`gait_phase_sign`).
 
     Attributes
     ----------
     heading_rad_, heading_change_rad_, heading_change_std_rad_, mag_heading_rad_, mag_heading_std_rad_ : per step.
     offset_rad_ : the device-to-walking offset used at each step.
     direction_rad_, direction_quality_ : the raw walking direction of each step from the acceleration.
+    gait_sign_ : per step, +1 walking, -1 running (flight phase), between when unsure (:func:`gait_phase_sign`).
 
     Notes
     -----
     The device yaw is the integral of the attitude's rotation about the earth's up axis (:func:`yaw_increments`), so it
     is defined whatever way the phone is held. ``heading_change_rad`` is the change of the mean device yaw from one
     step to the next (gyro only); ``heading_rad`` adds the smoothed offset, so its differences also follow slow
-    changes of how the phone is held. Its frame is VQF's 6D frame: up is up, the zero of heading is arbitrary
+    changes of how the phone is held. The walking direction's sign uses the phase relation of each step's gait
+    (walking: forward acceleration leads vertical by a quarter step; running: it lags), so walking and running steps
+    vote for the same offset and a run inside a walk does not turn the path around. Its frame is VQF's 6D frame: up is up, the zero of heading is arbitrary
     (the magnetic heading gives the absolute one). The heading-change std grows with the VQF gyro-bias uncertainty
     times the elapsed time (drift) and with the angle random walk. Without a gyroscope, heading changes are
     unobservable: 0 with ``no_gyro_std_rad`` and a warning.
@@ -121,7 +169,9 @@ class AttitudeStepHeading(Algorithm):
     def __init__(self, *, offset_window_steps: int = 40, min_direction_quality: float = 0.2,
                  gyro_arw_rad_per_sqrt_s: float = 0.005, step_direction_std_rad: float = 0.02,
                  no_gyro_std_rad: float = np.pi / 2, mag_norm_tolerance: float = 0.15,
-                 mag_dip_tolerance_rad: float = np.radians(10.0), mag_heading_std_rad: float = 0.1):
+                 mag_dip_tolerance_rad: float = np.radians(10.0), mag_heading_std_rad: float = 0.1,
+                 flight_max_specific_force_g: float = FLIGHT_MAX_SPECIFIC_FORCE_G,
+                 walk_min_specific_force_g: float = WALK_MIN_SPECIFIC_FORCE_G):
         self.offset_window_steps = offset_window_steps
         self.min_direction_quality = min_direction_quality
         self.gyro_arw_rad_per_sqrt_s = gyro_arw_rad_per_sqrt_s
@@ -130,6 +180,8 @@ class AttitudeStepHeading(Algorithm):
         self.mag_norm_tolerance = mag_norm_tolerance
         self.mag_dip_tolerance_rad = mag_dip_tolerance_rad
         self.mag_heading_std_rad = mag_heading_std_rad
+        self.flight_max_specific_force_g = flight_max_specific_force_g
+        self.walk_min_specific_force_g = walk_min_specific_force_g
 
     def estimate(self, u: UniformImu, attitude: Attitude, steps: pd.DataFrame) -> "AttitudeStepHeading":
         if "t_s" not in steps.columns:
@@ -139,6 +191,7 @@ class AttitudeStepHeading(Algorithm):
         nan = np.full(n, np.nan)
         self.direction_rad_, self.direction_quality_, self.offset_rad_ = nan.copy(), np.zeros(n), nan.copy()
         self.mag_heading_rad_, self.mag_heading_std_rad_ = nan.copy(), nan.copy()
+        self.gait_sign_ = np.ones(n)
         if not attitude.has_gyro:
             if n:
                 warnings.warn("heading: no gyroscope; heading changes are unobservable (0 with a std of "
@@ -171,7 +224,11 @@ class AttitudeStepHeading(Algorithm):
             a = _bandpass(acc_e[lo:hi], u.rate_hz, sb)
             if a is None:
                 continue
-            c = np.vstack([np.zeros((1, 6)), np.cumsum(_products(a, int(round(0.25 * sb * u.rate_hz))), axis=0)])
+            sign = gait_phase_sign(acc_e[lo:hi, 2], u.rate_hz, sb, flight_max_g=self.flight_max_specific_force_g,
+                                   walk_min_g=self.walk_min_specific_force_g)
+            self.gait_sign_[idx] = sign[np.clip(np.searchsorted(u.t_s, tb) - lo, 0, len(sign) - 1)]
+            c = np.vstack([np.zeros((1, 6)),
+                           np.cumsum(_products(a, int(round(0.25 * sb * u.rate_hz)), sign), axis=0)])
             w_lo = np.clip(np.searchsorted(u.t_s, tb - 2.0 * sb) - lo, 0, len(a))
             w_hi = np.clip(np.searchsorted(u.t_s, tb + 2.0 * sb) - lo, 0, len(a))
             d, qual = _direction(c[w_hi] - c[w_lo], w_hi - w_lo)
