@@ -47,8 +47,8 @@ class ZeroVelocityDetection(Algorithm):
         typical peak angular rate of the swings around (running median over ``swing_window`` swings of a first
         detection) where that is below ``gyr_threshold_radps``. A slow walk turns the foot more slowly, in the swing
         and in the heel rise, so a fixed threshold keeps part of the heel rise (the foot already moving) in the
-        stance. 0.125 keeps the fixed threshold for the normal walks it was set on (swing peaks near 10 rad/s:
-        gaitmap, x-io); 0 disables it.
+        stance. 0.14 leaves the real walks the fixed threshold was set on unchanged (swing peaks 8-14 rad/s:
+        gaitmap walk and stairs, x-io; 0.125 already moved a gaitmap result by 0.5 mm); 0 disables it.
     swing_window : number of swings of that running median.
     min_stance_s : shorter rest phases are dropped (the foot passes through zero angular rate in mid-swing).
     min_swing_s : shorter motion bursts inside a stance (heel-strike shocks, a wobble) are merged into it.
@@ -81,7 +81,7 @@ class ZeroVelocityDetection(Algorithm):
     """
 
     def __init__(self, *, window_s: float = 0.05, gyr_threshold_radps: float = 1.2, acc_threshold_mps2: float = 2.5,
-                 noise_factor: float = 5.0, swing_fraction: float = 0.125, swing_window: int = 5,
+                 noise_factor: float = 5.0, swing_fraction: float = 0.14, swing_window: int = 5,
                  min_stance_s: float = 0.06, min_swing_s: float = 0.2) -> None:
         self.window_s = window_s
         self.gyr_threshold_radps = gyr_threshold_radps
