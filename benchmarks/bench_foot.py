@@ -1,5 +1,6 @@
 """Shoe-mounted IMUs: gaitmap motion-capture stride lengths (57 strides, both methods), x-io closed loop, stairs,
-and the speed on one hour of 200 Hz data from both feet (the real walk tiled).
+simulated walks at slow / normal / fast speeds (``pdr.sim``, both feet, truth = heel displacement between heel
+strikes), and the speed on one hour of 200 Hz data from both feet (the real walk tiled).
 
 Recordings are made with the project's importers (``pdr.io.importers``, formats ``gaitmap`` and ``xio``) from
 ``datasets/`` (or ``../shared/datasets``) into a temporary folder. The mocap reference is matched to our strides by
@@ -19,12 +20,17 @@ import pandas as pd
 from pdr.foot import FootStepTrackerStride, ZuptInsStride
 from pdr.io.importers import import_recordings
 from pdr.io.recording import Recording, load_recording
+from pdr.eval.evaluate import _match_intervals
 from pdr.pipelines.foot import foot_strides
+from pdr.sim import simulate
 
 ROOT = Path(__file__).resolve().parents[1]
 RAMPP = "Rampp et al. 2015 (shoe IMU, geriatric patients): 6.26 cm stride-length MAE"
 XIO = "x-io Gait-Tracking pipeline on this file: 82 mm"
 LOOP_M = 25.0  # the walked loop, from the x-io README ("about 25 m")
+SIM_SPEEDS_MPS = (0.7, 1.25, 1.75)  # one minute each, standing 3 s before and after each
+SIM_BINS = (("slow (< 1 m/s)", 0.0, 1.0), ("normal (1-1.5 m/s)", 1.0, 1.5), ("fast (> 1.5 m/s)", 1.5, 9.0))
+SIM_ANCHOR = "pdr simulate truth: heel displacement between heel strikes"
 
 
 def _data(name: str) -> Path:
@@ -48,6 +54,30 @@ def mocap_errors(strides: pd.DataFrame, reference: pd.DataFrame) -> np.ndarray:
         ov = np.minimum(mine["t_end_s"], r["t_end_s"]) - np.maximum(mine["t_start_s"], r["t_start_s"])
         errs.append(float(mine["length_m"].iloc[int(np.argmax(ov.to_numpy()))] - r["length_m"]))
     return np.asarray(errs)
+
+
+def simulated_errors(seed: int, methods: dict[str, dict]) -> pd.DataFrame:
+    """``method, speed_mps, error_m`` of every reference stride of a simulated walk (both feet at 200 Hz, one minute at
+    each of SIM_SPEEDS_MPS) matched to our strides by shared time (as ``pdr evaluate``); speed = reference stride
+    length / duration."""
+    feet = [{"placement": f"foot_{s}", "rate_hz": 200.0, "magnetometer": False, "barometer": False}
+            for s in ("left", "right")]
+    segments = [{"duration_s": 3.0, "speed_mps": 0.0}]
+    for v in SIM_SPEEDS_MPS:
+        segments += [{"duration_s": 60.0, "speed_mps": v}, {"duration_s": 3.0, "speed_mps": 0.0}]
+    rec = simulate({"route": {"waypoints_m": [[0.0, 0.0], [60.0, 0.0], [60.0, 40.0], [0.0, 40.0]]},
+                    "segment": segments, "imu": feet, "gnss": {"enabled": False}}, seed=seed)
+    ref = rec.reference["strides"]
+    rows = []
+    for name, section in methods.items():
+        est = foot_strides(rec, {"foot": section})
+        for foot in ("left", "right"):
+            r, e = ref[ref["foot"] == foot], est[est["foot"] == foot]
+            i_ref, i_est = _match_intervals(r, e, 0.5)
+            r = r.iloc[i_ref]
+            rows.append(pd.DataFrame({"method": name, "speed_mps": r["length_m"] / (r["t_end_s"] - r["t_start_s"]),
+                                      "error_m": e["length_m"].to_numpy()[i_est] - r["length_m"].to_numpy()}))
+    return pd.concat(rows, ignore_index=True)
 
 
 def _tile(imu: pd.DataFrame, n: int, rate_hz: float) -> pd.DataFrame:
@@ -118,6 +148,19 @@ def run(quick: bool = False) -> list[dict]:
         row(f"gaitmap {name.replace('_', ' ')}, left foot, ZUPT INS", "median height change per climbing stride",
             round(float(np.median(climb["dz_m"])), 3) if len(climb) else float("nan"), "m", "",
             "two stair risers, about 0.3-0.35 m")
+
+    seeds = (1,) if quick else (1, 2, 3)
+    methods = {"ZUPT INS (default)": {"method": "zupt_ins"},
+               "FootStep-Tracker + double feet": {"method": "footstep_tracker"}}
+    errs = pd.concat([simulated_errors(seed, methods) for seed in seeds], ignore_index=True)
+    for label, lo, hi in SIM_BINS:
+        sel = errs[(errs["speed_mps"] >= lo) & (errs["speed_mps"] < hi)]
+        case = f"pdr.sim walk {'/'.join(f'{v:g}' for v in SIM_SPEEDS_MPS)} m/s, seed{'s' if len(seeds) > 1 else ''} " \
+               f"{','.join(map(str, seeds))}, {label}, {len(sel) // len(methods)} strides"
+        for name in methods:
+            e = sel.loc[sel["method"] == name, "error_m"].to_numpy()
+            row(case, f"stride length MAE, {name}", round(float(np.mean(np.abs(e))), 4), "m", "", SIM_ANCHOR)
+            row(case, f"stride length bias, {name}", round(float(np.mean(e)), 4), "m", "", "")
 
     minutes = 10 if quick else 60
     n = int(200 * 60 * minutes)
