@@ -377,6 +377,7 @@ def fuzz_import(fmt: str, seed: Path, ops, pick: int, *, zip_it: bool = False, z
 @FUZZ
 @given(ops=MUTATIONS)
 @example(ops=[("rows", 1)])  # one row: IndexError in the clock check (fixed in _common.steady_clock)
+@example(ops=[("swap_columns", 0, 5, False)])  # time in the step-count column: np.repeat of 89 GiB (fixed in oxford)
 def test_fuzz_oxford(seeds, ops):
     fuzz_import("oxford", seeds["oxford"], ops, 0)
 
@@ -384,6 +385,7 @@ def test_fuzz_oxford(seeds, ops):
 @FUZZ
 @given(ops=MUTATIONS)
 @example(ops=[("time_jump", 0.5, 1e12)])  # written with 9 digits, t_s repeated: an invalid recording (fixed in save_recording)
+@example(ops=[("number", 0.0, b"-1e308")])  # a clock over 1e308 s resampled at 1 Hz: "Maximum allowed size" (steady_clock)
 def test_fuzz_xio(seeds, ops):
     fuzz_import("xio", seeds["xio"], ops, 0)
 

@@ -264,6 +264,9 @@ def steady_clock(t: np.ndarray, values: np.ndarray, what: str) -> tuple[np.ndarr
     if q25 > 0 and q75 / q25 <= MAX_DT_SPREAD:
         return t, values
     rate = float(max(1.0, round((len(t) - 1) / (t[-1] - t[0]))))
+    if (t[-1] - t[0]) * rate + 1 > 2 * len(t):  # a mean rate below 1 Hz: the clock jumped (or is not in seconds)
+        raise InputError(f"{what}: expected a sensor clock, found {len(t)} samples spread over {t[-1] - t[0]:.6g} s "
+                         f"(the largest interval {float(dt.max()):.6g} s: a clock jump or a wrong time unit?)")
     grid = uniform_grid(t[0], t[-1], rate)
     warnings.warn(f"{what}: sample intervals vary wildly (interquartile {q25 * 1e3:.2f} to {q75 * 1e3:.2f} ms); "
                   f"resampled linearly to a uniform {rate:g} Hz grid", stacklevel=3)

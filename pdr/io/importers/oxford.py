@@ -30,6 +30,7 @@ from pdr.io.importers._common import (
 from pdr.io.recording import Recording
 
 NS_PER_S = 1e9
+MAX_STEPS_PER_SAMPLE = 3  # a walker makes < 5 steps/s; the files sample at ~100 Hz (the count rises by 0 or 1)
 PLACEMENT_BY_POSITION = {
     "hand": "hand", "inhand": "hand",
     "frontpocket": "pocket", "backpocket": "pocket",
@@ -77,6 +78,9 @@ def _validation_file(path: Path) -> Recording:
     inc = np.diff(truth, prepend=truth[0])
     if (inc < 0).any():
         raise InputError(f"{what}: expected a cumulative steps_ground_truth column, found it decreasing")
+    if (inc != np.round(inc)).any() or inc.max() > MAX_STEPS_PER_SAMPLE:
+        raise InputError(f"{what}: expected steps_ground_truth to count whole steps, at most {MAX_STEPS_PER_SAMPLE} per "
+                         f"sample, found a rise of {inc.max():.6g} (columns swapped or damaged?)")
     step_ns = np.repeat(t_ns, inc.astype(int))
     keep = increasing_mask(t_ns, what, row_offset=first)
     t0 = t_ns[keep][0]
