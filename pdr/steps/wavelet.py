@@ -101,9 +101,13 @@ class WaveletStepDetection(Algorithm):
     Parameters
     ----------
     level : decomposition level of the kept detail (Ladetto et al.: 4).
-    min_step_freq_hz, max_step_freq_hz : the cadence range of human walking and running (steps per second).
+    min_step_freq_hz, max_step_freq_hz : the cadence range of human walking and running (steps per second). The
+        floor of 1 step/s keeps the longest step shorter than a normal stride (about 1.1 s), so a thigh sensor's
+        stride period is never taken for a step (with 0.5 steps/s and an 8 s window, Oxford back pocket lost 12%).
     bout_window_s : window of the walking-bout detector (about two strides at the slowest cadence, and more).
-    min_acc_std_mps2 : below this standard deviation of |a| a window is at rest.
+    min_acc_std_mps2 : below this standard deviation of |a| a window is at rest. A waist sensor sees 0.4 m/s2 at
+        0.6 m/s but 0.2-0.3 m/s2 at 0.4-0.5 m/s (simulator), so slower walking is taken for rest; 0.15 would find it
+        but admits daily-living movement that is not walking (mobgap: whole-recording IC F1 0.71 -> 0.69).
     min_periodicity : a walking window's autocorrelation at the gait period is at least this.
     min_bout_steps : shorter walking runs are not walking (a turn on the spot, handling the phone).
     min_peak_ratio : a maximum smaller than this fraction of its neighbours' maxima is not a step (see
