@@ -154,12 +154,13 @@ class AttitudeStepHeading(Algorithm):
     The device yaw is the integral of the attitude's rotation about the earth's up axis (:func:`yaw_increments`), so it
     is defined whatever way the phone is held. ``heading_change_rad`` is the change of the mean device yaw from one
     step to the next (gyro only); ``heading_rad`` adds the smoothed offset, so its differences also follow slow
-    changes of how the phone is held. The walking direction's sign uses the phase relation of each step's gait
-    (walking: forward acceleration leads vertical by a quarter step; running: it lags), so walking and running steps
-    vote for the same offset and a run inside a walk does not turn the path around. Its frame is VQF's 6D frame: up is up, the zero of heading is arbitrary
-    (the magnetic heading gives the absolute one). The heading-change std grows with the VQF gyro-bias uncertainty
-    times the elapsed time (drift) and with the angle random walk. Without a gyroscope, heading changes are
-    unobservable: 0 with ``no_gyro_std_rad`` and a warning.
+    changes of how the phone is held. The heading's frame is VQF's 6D frame: up is up, the zero of heading is
+    arbitrary (the magnetic heading gives the absolute one). The walking direction's sign uses the phase relation of
+    each stretch's gait (walking: forward acceleration leads vertical by a quarter step; running, told by its flight
+    phase: it lags), so walking and running steps vote for the same offset and a run inside a walk does not turn the
+    path around (without the running relation, every running step pointed backwards). The heading-change std grows
+    with the VQF gyro-bias uncertainty times the elapsed time (drift) and with the angle random walk. Without a
+    gyroscope, heading changes are unobservable: 0 with ``no_gyro_std_rad`` and a warning.
 
     Example
     -------
