@@ -758,7 +758,7 @@ class WearableCameraGaitEstimation:
                     b = state[best]
                     memory = np.full(n_forms, logw.min() - log_c)  # the forms' weights so far are kept
                     np.maximum.at(memory, form, logw)
-                    state, cov, form, logw = self._initial(pts, uv, b[0], b[1], b[2], b[4], memory)
+                    state, cov, form, logw = self._initial(pts, uv, b[0], b[1], b[2], b[4], memory, b[3])
                     logw = logw - logw.max()
                     best, lost = 0, 0
                     n_relocalised += 1
@@ -783,14 +783,16 @@ class WearableCameraGaitEstimation:
         self.cycles_ = cycles_from_phase(t, out_state[:, 3], self.states_["form"].to_numpy())
         return self
 
-    def _initial(self, pts, uv, e0, n0, psi0, rate0=None, log_prior=None):
+    def _initial(self, pts, uv, e0, n0, psi0, rate0=None, log_prior=None, phase0=0.0):
         """Candidates on a grid of phases in every form at the start pose (with the forms' cadences, or
         ``rate0``), each corrected by three iterated updates, weighted by eq. 7 on the corrected errors (plus the
-        forms' ``log_prior``); the best ``n_candidates`` are kept."""
+        forms' ``log_prior``); the best ``n_candidates`` are kept. The grid phases are placed nearest to
+        ``phase0`` (so that a search during the walk keeps the count of cycles)."""
         tp = self.templates
         n_forms, n_ph = len(tp.forms_), self.n_initial_phases
         form = np.repeat(np.arange(n_forms), n_ph)
         eta = np.tile(TWO_PI * np.arange(n_ph) / n_ph, n_forms)
+        eta = phase0 + np.angle(np.exp(1j * (eta - phase0)))
         rate = tp.phase_rate_radps_[form] if rate0 is None else np.full(len(form), rate0)
         state = np.stack([np.full(len(form), e0), np.full(len(form), n0), np.full(len(form), psi0), eta, rate], -1)
         std = np.stack([np.full(len(form), self.initial_position_std_m), np.full(len(form), self.initial_position_std_m),
@@ -817,11 +819,11 @@ class WearableCameraGaitEstimation:
 
 
 def cycles_from_phase(t_s: np.ndarray, phase_rad: np.ndarray, form: np.ndarray) -> pd.DataFrame:
-    """Gait cycles between consecutive crossings of multiples of 2 pi by the phase, with the form held for most of
-    each cycle: ``t_start_s, t_end_s, form``."""
+    """Gait cycles between consecutive first crossings of multiples of 2 pi by the phase, with the form held for
+    most of each cycle: ``t_start_s, t_end_s, form``."""
     ok = np.isfinite(phase_rad)
     t, ph, fm = t_s[ok], phase_rad[ok], np.asarray(form)[ok]
-    k = np.floor(ph / TWO_PI)
+    k = np.floor(np.maximum.accumulate(ph) / TWO_PI) if len(ph) else ph  # a phase stepping back starts no cycle
     starts = np.flatnonzero(np.diff(k) > 0) + 1
     rows = []
     for a, b in zip(starts[:-1], starts[1:]):
