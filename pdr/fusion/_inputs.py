@@ -52,6 +52,7 @@ class Problem:
     stride_k: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), int))  # epochs at start and end
     stride_length_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
     stride_std_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    stride_source: np.ndarray = field(default_factory=lambda: np.zeros(0, object))  # the record's ``source`` (str)
 
     @property
     def n_steps(self) -> int:
@@ -221,7 +222,8 @@ def _add_gnss(problem: Problem, gnss: pd.DataFrame, default_h_acc_m: float, tole
 
 
 def _add_strides(problem: Problem, strides: pd.DataFrame) -> None:
-    """Stride records -> range constraints between the epochs nearest to their start and end (any source)."""
+    """Stride records -> range constraints between the epochs nearest to their start and end (any source; the
+    ``source`` column names it, ``"stride"`` where the table has none)."""
     _require(strides, STRIDE_COLUMNS, "strides")
     if len(strides) == 0:
         return
@@ -242,3 +244,6 @@ def _add_strides(problem: Problem, strides: pd.DataFrame) -> None:
     keep = k1 > k0
     problem.stride_k = np.column_stack([k0[keep], k1[keep]])
     problem.stride_length_m, problem.stride_std_m = length[ok][keep], std[ok][keep]
+    source = (strides["source"].astype(object).where(strides["source"].notna(), "stride").astype(str).to_numpy(object)
+              if "source" in strides.columns else np.full(len(strides), "stride", object))
+    problem.stride_source = source[ok][keep]

@@ -104,3 +104,18 @@ def solve_series(like: SmoothSeries, t_s: np.ndarray, y: np.ndarray, scale: np.n
     banded[0, 1:] = off
     banded[1] = diag
     return SmoothSeries(t0_s=like.t0_s, knot_s=like.knot_s, values=solveh_banded(banded, rhs))
+
+
+def solve_stride_scales(distance_m: np.ndarray, length_m: np.ndarray, std_m: np.ndarray, group: np.ndarray,
+                        prior_std: np.ndarray, current: np.ndarray, huber_k: float) -> tuple[np.ndarray, np.ndarray]:
+    """MAP multiplicative length scale of each stride source, ``distance_j = s_g length_j + e_j``, prior
+    ``N(1, prior_std_g^2)``; each stride weighted as its Huber factor is at the ``current`` scales.
+
+    Returns ``(scale, std)`` per source; the std is conditional on the distances (the poses)."""
+    n = len(prior_std)
+    r = np.abs(distance_m - current[group] * length_m) / std_m
+    w = np.where(r <= huber_k, 1.0, huber_k / np.maximum(r, 1e-12)) / np.square(std_m)
+    p0 = 1.0 / np.square(prior_std)
+    info = np.bincount(group, w * length_m ** 2, minlength=n) + p0
+    rhs = np.bincount(group, w * length_m * distance_m, minlength=n) + p0
+    return rhs / info, 1.0 / np.sqrt(info)

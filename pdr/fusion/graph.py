@@ -8,6 +8,8 @@ import warnings
 import gtsam
 import numpy as np
 import pandas as pd
+import scipy.sparse
+import scipy.sparse.linalg
 
 from pdr.base import Algorithm
 from pdr.errors import InputError
@@ -19,6 +21,7 @@ from pdr.fusion._linear import (
     solve_deviation,
     solve_series,
     solve_step_model,
+    solve_stride_scales,
     step_model_params,
     zero_series,
 )
@@ -167,6 +170,18 @@ class FactorGraphFusion(Algorithm):
         columns ``step_freq_hz``, ``acc_var_m2ps4`` and at least two used fixes or stride factors).
     prior_a_std_m, prior_b_std_m_per_hz, prior_c_std_m_per_m2ps4
         Prior standard deviations of ``(A, B, C)`` where the step model carries no ``covariance``.
+    calibrate_stride_scales
+        Estimate a multiplicative length scale ``s`` per stride source (the records' ``source``: ``leg_camera``,
+        ``foot_imu``, ...), prior 1, from GNSS (at least two fixes); without GNSS every scale stays 1.
+    stride_scale_prior_std, stride_scale_prior_std_by_source
+        Prior standard deviation of the scales (how far a source is trusted a priori, e.g. 0.07 = 7%), and
+        per-source overrides (``{"foot_imu": 0.03}``).
+    gnss_correlated_std_m, gnss_correlation_s
+        The slowly varying part of the GNSS error (m per axis) and its correlation time (s). The GNSS factors treat
+        fixes as independent, which is fine for positions but claims far too much about a length scale over a short
+        walk (a few metres of drift over 40 s is a 10% scale error); the information GNSS gives a stride scale is
+        capped at ``D^2 / (2 m sigma^2)`` (``D`` metres walked with fixes and strides of that source, ``m`` the number
+        of correlation times in it, at least 1).
     gyro_bias_knot_s, gyro_bias_rw_radps_per_sqrt_s, gyro_bias_prior_std_radps
         Heading-rate bias of the relative heading changes: piecewise linear between knots this far apart, a random
         walk between knots, zero-mean prior.
@@ -197,6 +212,10 @@ class FactorGraphFusion(Algorithm):
         The estimated heading-rate bias and magnetometer deviation at each step.
     mag_deviation_coef_ : ndarray
         The deviation curve's coefficients (``[1, cos h, sin h, cos 2h, sin 2h]``), for an :class:`IncrementalFusion`.
+    stride_scales_ : dict
+        Per stride source: ``scale`` (multiplies its lengths), ``std`` (marginal over the poses and the step model,
+        conditional on the heading parameters; the prior std when not calibrated), ``prior_std``, ``n_strides``,
+        ``calibrated``. Empty without strides.
     solver_ : dict
         ``method, iterations`` (LM, summed), ``alternations, final_error, time_s, marginals_time_s, gnss_used,
         gnss_rejected, converged``.
@@ -212,7 +231,11 @@ class FactorGraphFusion(Algorithm):
     alternating with the pose solve (block coordinate descent on the joint least-squares objective, the fixed point
     accelerated by Anderson mixing, Walker & Ni 2011), so every per-step factor stays built-in (a shared (A, B, C)
     variable in 10,000 Python factors is not tractable, see DESIGN.md); each re-solve starts from the previous
-    solution. The first estimate is dead reckoning turned onto the GNSS course (a gyro bias can wind the raw chain
+    solution. Stride scales (one per source, ``range = s L``, with GNSS only): given the poses they would barely move
+    (the strides themselves set the path length), so each alternation takes a Gauss-Newton step of the scales and
+    the step model jointly with the poses (the poses eliminated from the linearised graph, a Schur complement), with
+    the information GNSS gives a scale capped for correlated GNSS errors; :meth:`_joint_step`.
+    The first estimate is dead reckoning turned onto the GNSS course (a gyro bias can wind the raw chain
     by whole turns, a local minimum for LM). GNSS factor: the built-in shifted prior gives the same path as the
     exact interpolating ``CustomFactor`` (2 mm apart on the benchmark walk) about 9 times faster, hence the default.
     Ordering METIS, and LM / marginals run on a thread with a large stack (a 100,000-pose chain overflows the default
@@ -229,7 +252,10 @@ class FactorGraphFusion(Algorithm):
                  lateral_std_m: float = 0.02, default_h_acc_m: float = 5.0, gnss_time_tolerance_s: float = 1.0,
                  gnss_factor: str = "shifted", huber_k: float = 1.345, gnss_gate_chi2: float = CHI2_2DOF_999,
                  calibrate_step_model: bool = True, prior_a_std_m: float = 0.2, prior_b_std_m_per_hz: float = 0.1,
-                 prior_c_std_m_per_m2ps4: float = 0.02, gyro_bias_knot_s: float = 60.0,
+                 prior_c_std_m_per_m2ps4: float = 0.02, calibrate_stride_scales: bool = True,
+                 stride_scale_prior_std: float = 0.07, stride_scale_prior_std_by_source: dict[str, float] | None = None,
+                 gnss_correlated_std_m: float = 3.0, gnss_correlation_s: float = 120.0,
+                 gyro_bias_knot_s: float = 60.0,
                  gyro_bias_rw_radps_per_sqrt_s: float = 1e-5, gyro_bias_prior_std_radps: float = 0.01,
                  mag_deviation_prior_std_rad: float = 0.3, max_alternations: int = 12, alternation_tol_m: float = 0.002,
                  max_step_duration_s: float = 2.0, gap_speed_std_mps: float = 1.0, max_rejected_run: int = 10,
@@ -246,6 +272,11 @@ class FactorGraphFusion(Algorithm):
         self.prior_a_std_m = prior_a_std_m
         self.prior_b_std_m_per_hz = prior_b_std_m_per_hz
         self.prior_c_std_m_per_m2ps4 = prior_c_std_m_per_m2ps4
+        self.calibrate_stride_scales = calibrate_stride_scales
+        self.stride_scale_prior_std = stride_scale_prior_std
+        self.stride_scale_prior_std_by_source = stride_scale_prior_std_by_source
+        self.gnss_correlated_std_m = gnss_correlated_std_m
+        self.gnss_correlation_s = gnss_correlation_s
         self.gyro_bias_knot_s = gyro_bias_knot_s
         self.gyro_bias_rw_radps_per_sqrt_s = gyro_bias_rw_radps_per_sqrt_s
         self.gyro_bias_prior_std_radps = gyro_bias_prior_std_radps
@@ -265,7 +296,8 @@ class FactorGraphFusion(Algorithm):
                     "huber_k", "gnss_gate_chi2", "gyro_bias_knot_s", "gyro_bias_rw_radps_per_sqrt_s",
                     "gyro_bias_prior_std_radps", "mag_deviation_prior_std_rad", "alternation_tol_m", "prior_a_std_m",
                     "prior_b_std_m_per_hz",
-                    "prior_c_std_m_per_m2ps4", "max_step_duration_s", "gap_speed_std_mps"]
+                    "prior_c_std_m_per_m2ps4", "max_step_duration_s", "gap_speed_std_mps", "stride_scale_prior_std",
+                    "gnss_correlated_std_m", "gnss_correlation_s"]
         for name in positive:
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and np.isfinite(value) and value > 0):
@@ -274,6 +306,19 @@ class FactorGraphFusion(Algorithm):
             value = getattr(self, name)
             if not (isinstance(value, int) and value >= 1):
                 raise InputError(f"{type(self).__name__} {name}: expected an integer >= 1, found {value!r}")
+        by_source = self.stride_scale_prior_std_by_source
+        if by_source is not None and not (isinstance(by_source, dict) and all(
+                isinstance(k, str) and isinstance(v, (int, float)) and np.isfinite(v) and v > 0
+                for k, v in by_source.items())):
+            raise InputError(f"{type(self).__name__} stride_scale_prior_std_by_source: expected a table of source name "
+                             f"-> number > 0, found {by_source!r}")
+
+    def _stride_sources(self, problem: Problem) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The stride sources (sorted names), each stride's index into them, and each source's scale prior std."""
+        sources, index = np.unique(problem.stride_source.astype(str), return_inverse=True)
+        by_source = self.stride_scale_prior_std_by_source or {}
+        prior = np.array([float(by_source.get(name, self.stride_scale_prior_std)) for name in sources])
+        return sources, index.reshape(-1).astype(int), prior
 
     def _prepare(self, steps, gnss, strides, t_start_s) -> Problem | None:
         return prepare(steps, gnss, strides, t_start_s=t_start_s,
@@ -291,6 +336,7 @@ class FactorGraphFusion(Algorithm):
         self.gyro_bias_radps_ = np.zeros(0)
         self.mag_deviation_rad_ = np.zeros(0)
         self.mag_deviation_coef_ = np.zeros(deviation_design(np.zeros(1)).shape[1])
+        self.stride_scales_ = {}
         self.solver_ = {"method": "levenberg_marquardt", "iterations": 0, "alternations": 0, "final_error": 0.0,
                         "time_s": 0.0, "marginals_time_s": 0.0, "gnss_used": 0, "gnss_rejected": 0, "converged": True}
         return self
@@ -322,29 +368,35 @@ class FactorGraphFusion(Algorithm):
                                                          self.prior_c_std_m_per_m2ps4))
         has_mag = np.isfinite(problem.mag_rad)
         estimate_bias = n_fix >= 2 or bool(has_mag.any())
+        sources, src, scale_prior_std = self._stride_sources(problem)
+        n_src = len(sources)
+        estimate_scales = bool(self.calibrate_stride_scales and n_fix >= 2 and n_src > 0)
+        scale_std = scale_prior_std.copy()
         bias = zero_series(problem.epoch_t_s, self.gyro_bias_knot_s)
         n_dev = deviation_design(np.zeros(1)).shape[1]
         nb = len(bias.values)
+        i_bias, i_dev = slice(3, 3 + nb), slice(3 + nb, 3 + nb + n_dev)
+        i_scale = slice(3 + nb + n_dev, 3 + nb + n_dev + n_src)
         dt = problem.step_duration_s
         known_turn = problem.dtheta_std_rad < BOUT_START_HEADING_STD_RAD
         known_turn[0] = False
         t_step = problem.epoch_t_s[1:]
         model_cov = None
         theta0 = model_prior.theta if calibrate else np.zeros(3)
-        params = np.concatenate([theta0, bias.values, np.zeros(n_dev)])
+        params = np.concatenate([theta0, bias.values, np.zeros(n_dev), np.ones(n_src)])
         # each parameter in metres of effect on the path (convergence test and acceleration)
         mean_length = float(np.mean(problem.step_length_m)) if n else 1.0
         mean_speed = mean_length / float(np.median(dt)) if n else 1.0
         feat_scale = np.abs(np.nanmean(problem.features[feats_ok], axis=0)) if calibrate else np.ones(3)
+        mean_stride = np.bincount(src, problem.stride_length_m, n_src) / np.maximum(np.bincount(src, minlength=n_src), 1)
         scale = np.concatenate([feat_scale, np.full(nb, 0.5 * self.gyro_bias_knot_s ** 2 * mean_speed),
-                                np.full(n_dev, 10.0 * mean_length)])
+                                np.full(n_dev, 10.0 * mean_length), mean_stride])
 
-        def unpack(p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-            b = SmoothSeries(bias.t0_s, bias.knot_s, p[3:3 + nb])
-            o = p[3 + nb:]
+        def unpack(p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+            b = SmoothSeries(bias.t0_s, bias.knot_s, p[i_bias])
             length = (np.where(feats_ok, np.nan_to_num(problem.features) @ p[:3], problem.step_length_m)
                       if calibrate else problem.step_length_m)
-            return length, problem.dtheta_rad - b(t_step) * dt, o
+            return length, problem.dtheta_rad - b(t_step) * dt, p[i_dev], problem.stride_length_m * p[i_scale][src]
 
         def update(poses: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
             """The closed-form parameter solve given the poses (each block kept where it is not observable)."""
@@ -353,30 +405,43 @@ class FactorGraphFusion(Algorithm):
                 resid = wrap_rad(np.diff(poses[:, 2]) - problem.dtheta_rad)
                 ok = known_turn & (dt > 0)
                 if ok.sum() >= 2:
-                    out[3:3 + nb] = solve_series(bias, t_step[ok], resid[ok], -dt[ok], problem.dtheta_std_rad[ok],
+                    out[i_bias] = solve_series(bias, t_step[ok], resid[ok], -dt[ok], problem.dtheta_std_rad[ok],
                                                  self.gyro_bias_rw_radps_per_sqrt_s,
                                                  self.gyro_bias_prior_std_radps).values
             if has_mag.any():
                 heading = poses[1:, 2][has_mag]
                 y = wrap_rad(problem.mag_rad[has_mag] - heading)
-                inlier = (np.abs(wrap_rad(y - deviation_design(heading) @ p[3 + nb:]))
+                inlier = (np.abs(wrap_rad(y - deviation_design(heading) @ p[i_dev]))
                           <= 5.0 * problem.mag_std_rad[has_mag])
                 if inlier.any():
-                    out[3 + nb:] = solve_deviation(y[inlier], heading[inlier], problem.mag_std_rad[has_mag][inlier],
+                    out[i_dev] = solve_deviation(y[inlier], heading[inlier], problem.mag_std_rad[has_mag][inlier],
                                                    self.mag_deviation_prior_std_rad)
             if calibrate:
                 along = self._along_track(poses)
                 out[:3], cov = solve_step_model(along[feats_ok], problem.features[feats_ok],
                                                 problem.step_length_std_m[feats_ok], model_prior)
+            if estimate_scales:
+                joint = self._joint_step(problem, poses, values, p, unpack, use, absolute, calibrate, feats_ok,
+                                         model_prior, src, scale_prior_std, i_scale)
+                if joint is None:  # the joint system is singular: the closed form, conditional on the poses
+                    k0, k1 = problem.stride_k[:, 0], problem.stride_k[:, 1]
+                    distance = np.linalg.norm(poses[k1, :2] - poses[k0, :2], axis=1)
+                    out[i_scale], scale_std[:] = solve_stride_scales(distance, problem.stride_length_m,
+                                                                     problem.stride_std_m, src, scale_prior_std,
+                                                                     p[i_scale], self.huber_k)
+                else:
+                    theta_new, out[i_scale], scale_std[:] = joint
+                    if calibrate:
+                        out[:3] = theta_new
             return out, cov
 
-        length0, dtheta0, _ = unpack(params)
+        length0, dtheta0, _, _ = unpack(params)
         poses = dead_reckoning_poses(problem, length0, dtheta0, (0.0, 0.0, problem.heading0_rad))
         correction = course_correction(poses, problem) if n_fix >= 2 else None
         if correction is not None:  # start from the GNSS course: a gyro bias can turn the chain by whole turns
             if estimate_bias:
-                params[3:3 + nb] = -correction[1]
-            length0, dtheta0, _ = unpack(params)
+                params[i_bias] = -correction[1]
+            length0, dtheta0, _, _ = unpack(params)
             poses = dead_reckoning_poses(problem, length0, dtheta0 - correction[1] * dt + np.diff(correction[0]),
                                          (0.0, 0.0, problem.heading0_rad + correction[0][0]))
         if absolute:
@@ -388,8 +453,7 @@ class FactorGraphFusion(Algorithm):
         history_g: list[np.ndarray] = []
         prev_f = prev_g = None
         for alternation in range(1, self.max_alternations + 1):
-            length_now, dtheta_now, offset_now = unpack(params)
-            graph = self._graph(problem, poses, length_now, dtheta_now, offset_now, use, absolute)
+            graph = self._graph(problem, poses, *unpack(params), use, absolute)
             values, iters, final_error = self._solve(graph, values if values is not None else self._values(poses))
             poses = gtsam.utilities.extractPose2(values)
             lm_iterations += iters
@@ -420,7 +484,7 @@ class FactorGraphFusion(Algorithm):
                 params = mapped
             use = new_use
         theta = params[:3]
-        bias = SmoothSeries(bias.t0_s, bias.knot_s, params[3:3 + nb])
+        bias = SmoothSeries(bias.t0_s, bias.knot_s, params[i_bias])
         t_marg = time.perf_counter()
         pos_std = np.full((n + 1, 2), np.nan)
         if self.compute_covariance:
@@ -432,7 +496,12 @@ class FactorGraphFusion(Algorithm):
         self.gnss_used_ = np.zeros(problem.gnss_n_rows, bool)
         self.gnss_used_[problem.gnss_row] = use
         self.gyro_bias_radps_ = bias(problem.epoch_t_s[1:])
-        self.mag_deviation_coef_ = params[3 + nb:].copy()
+        self.mag_deviation_coef_ = params[i_dev].copy()
+        self.stride_scales_ = {
+            str(name): {"scale": float(params[i_scale][q]) if estimate_scales else 1.0,
+                        "std": float(scale_std[q]), "prior_std": float(scale_prior_std[q]),
+                        "n_strides": int(np.sum(src == q)), "calibrated": estimate_scales}
+            for q, name in enumerate(sources)}
         self.mag_deviation_rad_ = deviation_design(poses[1:, 2]) @ self.mag_deviation_coef_
         if calibrate:
             self.step_model_ = type(step_model)(a_m=float(theta[0]), b_m_per_hz=float(theta[1]),
@@ -444,7 +513,8 @@ class FactorGraphFusion(Algorithm):
         self.solver_ = {"method": "levenberg_marquardt", "iterations": lm_iterations, "alternations": alternation,
                         "final_error": final_error, "time_s": t_end - t_begin, "marginals_time_s": t_end - t_marg,
                         "gnss_used": int(use.sum()), "gnss_rejected": int((~use).sum()), "converged": converged,
-                        "gnss_factor": self.gnss_factor, "step_model_calibrated": calibrate}
+                        "gnss_factor": self.gnss_factor, "step_model_calibrated": calibrate,
+                        "stride_scales_calibrated": estimate_scales}
         return self
 
     # ------------------------------------------------------------------------------------------------------------
@@ -454,7 +524,8 @@ class FactorGraphFusion(Algorithm):
         return d[:, 0] * np.cos(poses[1:, 2]) + d[:, 1] * np.sin(poses[1:, 2])
 
     def _graph(self, problem: Problem, poses: np.ndarray, length: np.ndarray, dtheta: np.ndarray,
-               deviation: np.ndarray, use: np.ndarray, absolute: bool) -> gtsam.NonlinearFactorGraph:
+               deviation: np.ndarray, stride_length: np.ndarray, use: np.ndarray,
+               absolute: bool) -> gtsam.NonlinearFactorGraph:
         graph = gtsam.NonlinearFactorGraph()
         if absolute:
             graph.add(factors.start_prior(gtsam.Pose2(*poses[0]), anchored=False))
@@ -467,7 +538,7 @@ class FactorGraphFusion(Algorithm):
         mag = problem.mag_rad[mag_idx] - deviation_design(poses[mag_idx + 1, 2]) @ deviation
         for i, m in zip(mag_idx, mag):
             graph.add(factors.heading_factor(i + 1, m, problem.mag_std_rad[i], self.huber_k))
-        for (k0, k1), length_m, std in zip(problem.stride_k, problem.stride_length_m, problem.stride_std_m):
+        for (k0, k1), length_m, std in zip(problem.stride_k, stride_length, problem.stride_std_m):
             graph.add(factors.stride_factor(k0, k1, length_m, std, self.huber_k))
         idx = np.flatnonzero(use)
         k, alpha = problem.gnss_k[idx], problem.gnss_alpha[idx]
@@ -503,6 +574,110 @@ class FactorGraphFusion(Algorithm):
             raise InputError(f"fusion: the factor graph could not be solved (expected every pose to be constrained "
                              f"by steps and an anchor; gtsam says: {str(exc).splitlines()[0]})") from None
         return result, optimizer.iterations(), optimizer.error()
+
+    def _gnss_scale_info(self, problem: Problem, poses: np.ndarray, use: np.ndarray, src: np.ndarray) -> np.ndarray:
+        """Per stride source, the most information (1 / scale variance) GNSS with correlated errors can give its scale:
+        ``D^2 / (2 m sigma^2)`` over the stretch covered by both used fixes and that source's strides."""
+        n_src = int(src.max()) + 1 if len(src) else 0
+        out = np.zeros(n_src)
+        k_fix = problem.gnss_k[use]
+        if len(k_fix) < 2:
+            return out
+        walked = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(poses[:, :2], axis=0), axis=1))])
+        for q in range(n_src):
+            k = problem.stride_k[src == q]
+            lo, hi = max(int(k_fix.min()), int(k[:, 0].min())), min(int(k_fix.max()) + 1, int(k[:, 1].max()))
+            if hi <= lo:
+                continue
+            distance = walked[hi] - walked[lo]
+            m = max(1.0, (problem.epoch_t_s[hi] - problem.epoch_t_s[lo]) / self.gnss_correlation_s)
+            out[q] = distance ** 2 / (2.0 * m * self.gnss_correlated_std_m ** 2)
+        return out
+
+    def _joint_step(self, problem: Problem, poses: np.ndarray, values: gtsam.Values, p: np.ndarray, unpack,
+                    use: np.ndarray, absolute: bool, calibrate: bool, feats_ok: np.ndarray, model_prior,
+                    src: np.ndarray, scale_prior_std: np.ndarray, i_scale: slice):
+        """Gauss-Newton step of the stride scales (and the step model, when calibrated) jointly with the poses.
+
+        Given the poses alone the scales barely move (the strides, not GNSS, set the path length: block coordinate
+        descent would crawl), so the poses are eliminated instead: the graph linearised at ``values`` (gtsam's
+        whitened, robust-weighted rows ``A dx = b``) gets one column per parameter (derivatives of the whitened errors
+        by finite differences of ``b``), and the Schur complement of the poses gives the parameters' reduced
+        system ``S dq = r``. With the priors that is the MAP step and the parameters' marginal covariance. Each
+        scale's information from GNSS is capped at :meth:`_gnss_scale_info` (the cap taken as a tighter prior with the
+        same posterior mean). Returns ``(theta, scales, scale_std)`` or None when the system is singular.
+        """
+        n_src = len(scale_prior_std)
+        length, dtheta, deviation, stride_length = unpack(p)
+        n_pose = 3 * values.size()  # all keys are Pose2, in key order: pose k -> columns 3k..3k+2
+
+        def jacobian(step_len: np.ndarray, stride_len: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+            graph = self._graph(problem, poses, step_len, dtheta, deviation, stride_len, use, absolute)
+            m = np.asarray(graph.linearize(values).sparseJacobian_())
+            return m[0].astype(int) - 1, m[1].astype(int) - 1, m[2]
+
+        rows, cols, vals = jacobian(length, stride_length)
+        n_rows = int(rows.max()) + 1
+        is_b = cols == n_pose
+
+        def b_of(r: np.ndarray, c: np.ndarray, v: np.ndarray) -> np.ndarray:
+            return np.bincount(r[c == n_pose], v[c == n_pose], n_rows)[:n_rows]
+
+        b0 = b_of(rows, cols, vals)
+        # rows in the order of _graph: start prior (3), steps (3 each), magnetometer headings (1 each), strides (1 each)
+        n_steps, n_mag = problem.n_steps, int(np.isfinite(problem.mag_rad).sum())
+        step_rows = 3 + np.arange(3 * n_steps)
+        stride_rows = 3 + 3 * n_steps + n_mag + np.arange(len(stride_length))
+        if n_rows != 3 + 3 * n_steps + n_mag + len(stride_length) + 2 * int(use.sum()):
+            return None  # not the row layout assumed here
+        columns = []
+        h = 1e-3
+        if calibrate:  # d(whitened error)/d(step length), then the chain rule through length = features . theta
+            d_len = -(b_of(*jacobian(length + h * feats_ok, stride_length)) - b0) / h
+            design = np.where(feats_ok[:, None], np.nan_to_num(problem.features), 0.0)
+            for k in range(3):
+                col = np.zeros(n_rows)
+                col[step_rows] = d_len[step_rows] * np.repeat(design[:, k], 3)
+                columns.append(col)
+        d_scale = -(b_of(*jacobian(length, stride_length + h * problem.stride_length_m)) - b0) / h
+        for q in range(n_src):
+            col = np.zeros(n_rows)
+            col[stride_rows[src == q]] = d_scale[stride_rows[src == q]]
+            columns.append(col)
+        a_pp = scipy.sparse.csc_matrix((vals[~is_b], (rows[~is_b], cols[~is_b])), shape=(n_rows, n_pose))
+        j_q = np.column_stack(columns)
+        h_pq = np.asarray(a_pp.T @ j_q)
+        try:
+            lu = scipy.sparse.linalg.splu(scipy.sparse.csc_matrix(a_pp.T @ a_pp))
+            x = lu.solve(np.column_stack([h_pq, a_pp.T @ b0]))
+        except RuntimeError:
+            return None
+        if not np.isfinite(x).all():
+            return None
+        s_red = j_q.T @ j_q - h_pq.T @ x[:, :-1]
+        r_red = j_q.T @ b0 - h_pq.T @ x[:, -1]
+        n_th = 3 if calibrate else 0
+        q_now = np.concatenate([p[:3] if calibrate else np.zeros(0), p[i_scale]])
+        q_prior = np.concatenate([model_prior.theta if calibrate else np.zeros(0), np.ones(n_src)])
+        prior = np.zeros((n_th + n_src, n_th + n_src))
+        if calibrate:
+            prior[:3, :3] = np.linalg.inv(model_prior.covariance)
+        info_prior = 1.0 / np.square(scale_prior_std)
+        info_cap = self._gnss_scale_info(problem, poses, use, src)
+        try:
+            prior[n_th:, n_th:] = np.diag(info_prior)
+            cov = np.linalg.inv(s_red + prior)
+            info_white = np.maximum(1.0 / np.diag(cov)[n_th:] - info_prior, 0.0)
+            capped = info_white > info_cap
+            # the capped posterior mean = the white-noise one with a prior of info_prior * info_white / info_cap
+            prior[n_th:, n_th:] = np.diag(np.where(capped, info_prior * info_white / np.maximum(info_cap, 1e-12),
+                                                   info_prior))
+            step = np.linalg.solve(s_red + prior, r_red - prior @ (q_now - q_prior))
+        except np.linalg.LinAlgError:
+            return None
+        q_new = q_now + step
+        std = 1.0 / np.sqrt(np.minimum(info_white, info_cap) + info_prior)
+        return (q_new[:3] if calibrate else None), q_new[n_th:], std
 
     @staticmethod
     def _marginal_std(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, poses: np.ndarray) -> np.ndarray:

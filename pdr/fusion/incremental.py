@@ -31,14 +31,19 @@ class IncrementalFusion(FactorGraphFusion):
     gyro_bias_radps, mag_deviation_coef
         A calibration from an earlier batch run (``FactorGraphFusion.gyro_bias_radps_[-1]``,
         ``mag_deviation_coef_``): removed from the heading changes / magnetometer headings. Default: none.
-    All parameters of :class:`~pdr.fusion.FactorGraphFusion` are accepted; the step model, heading-rate bias and
-    magnetometer deviation are *not* re-estimated here (a navigation run uses a calibration, e.g. from ``pdr
-    calibrate`` or an earlier batch run): step lengths are the table's ``step_length_m``.
+    stride_scales
+        Length scale per stride source (``{"leg_camera": 1.08}``, e.g. the ``scale`` of an earlier batch run's
+        ``stride_scales_``): each stride's length is multiplied by its source's scale. Default: 1 for every source.
+    All parameters of :class:`~pdr.fusion.FactorGraphFusion` are accepted; the step model, heading-rate bias,
+    magnetometer deviation and stride scales are *not* re-estimated here (a navigation run uses a calibration, e.g.
+    from ``pdr calibrate`` or an earlier batch run): step lengths are the table's ``step_length_m``.
 
     Attributes
     ----------
     trajectory_, step_model_ (the given model), step_length_m_, gnss_used_ (causal gate), solver_
         As :class:`~pdr.fusion.FactorGraphFusion`; ``solver_["time_per_step_ms"]`` is the mean update time.
+    stride_scales_ : dict
+        As :class:`~pdr.fusion.FactorGraphFusion`, with the given scales (``calibrated`` False, ``std`` the prior's).
     smoothed_trajectory_ : DataFrame
         The final estimate of every pose (``e_std_m``, ``n_std_m`` from the iSAM2 marginals).
 
@@ -56,18 +61,20 @@ class IncrementalFusion(FactorGraphFusion):
 
     def __init__(self, *, relinearize_threshold: float = 0.1, relinearize_skip: int = 10, wildfire_threshold: float = 0.01,
                  gyro_bias_radps: float = 0.0,
-                 mag_deviation_coef: list[float] | None = None, **kwargs):
+                 mag_deviation_coef: list[float] | None = None, stride_scales: dict[str, float] | None = None,
+                 **kwargs):
         super().__init__(**kwargs)
         self.relinearize_threshold = relinearize_threshold
         self.relinearize_skip = relinearize_skip
         self.wildfire_threshold = wildfire_threshold
         self.gyro_bias_radps = gyro_bias_radps
         self.mag_deviation_coef = mag_deviation_coef
+        self.stride_scales = stride_scales
 
     @classmethod
     def param_names(cls) -> list[str]:
         return ["relinearize_threshold", "relinearize_skip", "wildfire_threshold", "gyro_bias_radps", "mag_deviation_coef",
-                *FactorGraphFusion.param_names()]
+                "stride_scales", *FactorGraphFusion.param_names()]
 
     def fuse(self, steps: pd.DataFrame, *, gnss: pd.DataFrame | None = None, strides: pd.DataFrame | None = None,
              step_model=None, t_start_s: float | None = None) -> IncrementalFusion:
@@ -93,6 +100,14 @@ class IncrementalFusion(FactorGraphFusion):
         if deviation.shape != (n_dev,) or not np.isfinite(deviation).all() or not np.isfinite(self.gyro_bias_radps):
             raise InputError(f"IncrementalFusion: expected mag_deviation_coef of {n_dev} finite numbers and a finite "
                              f"gyro_bias_radps, found {self.mag_deviation_coef!r}, {self.gyro_bias_radps!r}")
+        given = self.stride_scales or {}
+        if not (isinstance(given, dict) and all(isinstance(k, str) and isinstance(v, (int, float)) and np.isfinite(v)
+                                                and v > 0 for k, v in given.items())):
+            raise InputError(f"IncrementalFusion stride_scales: expected a table of source name -> number > 0, "
+                             f"found {self.stride_scales!r}")
+        sources, src, scale_prior_std = self._stride_sources(problem)
+        source_scale = np.array([float(given.get(name, 1.0)) for name in sources])
+        stride_length = problem.stride_length_m * source_scale[src]
         dtheta = problem.dtheta_rad - self.gyro_bias_radps * problem.step_duration_s
         dtheta[0] = 0.0
         params = gtsam.ISAM2Params()
@@ -136,8 +151,7 @@ class IncrementalFusion(FactorGraphFusion):
                 graph.add(factors.heading_factor(i + 1, mag, problem.mag_std_rad[i], self.huber_k))
             for j in np.flatnonzero(stride_end == i + 1):
                 k0, k1 = problem.stride_k[j]
-                graph.add(factors.stride_factor(k0, k1, problem.stride_length_m[j], problem.stride_std_m[j],
-                                                self.huber_k))
+                graph.add(factors.stride_factor(k0, k1, stride_length[j], problem.stride_std_m[j], self.huber_k))
             ends = np.array([[current.x(), current.y()], [predicted.x(), predicted.y()]])
             while cursor < n_fix and problem.gnss_k[fix_order[cursor]] <= i:
                 j = fix_order[cursor]
@@ -177,6 +191,9 @@ class IncrementalFusion(FactorGraphFusion):
         self.gyro_bias_radps_ = np.full(n, float(self.gyro_bias_radps))
         self.mag_deviation_coef_ = deviation
         self.mag_deviation_rad_ = deviation_design(poses[1:, 2]) @ deviation
+        self.stride_scales_ = {str(name): {"scale": float(source_scale[q]), "std": float(scale_prior_std[q]),
+                                           "prior_std": float(scale_prior_std[q]), "n_strides": int(np.sum(src == q)),
+                                           "calibrated": False} for q, name in enumerate(sources)}
         self.solver_ = {
             "method": "isam2", "iterations": n, "alternations": 0,
             "final_error": float(isam.getFactorsUnsafe().error(estimate)), "time_s": time.perf_counter() - t_begin,

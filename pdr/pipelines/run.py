@@ -213,6 +213,7 @@ def run_recording(rec: Path, out: Path, *, config_path=None, model_path=None, us
             traj = start_only_trajectory(float(recording.imu["t_s"].iloc[0]))
         gnss_used = np.asarray(fusion.gnss_used_, bool) if gnss is not None else None
         solver = {"fusion": method, **fusion.solver_}
+        stride_scales = getattr(fusion, "stride_scales_", None) or {}  # per source; the EKF does not use strides
         lap("fusion_s")
 
     run_warnings = [" ".join(str(w.message).split()) for w in caught]
@@ -243,6 +244,8 @@ def run_recording(rec: Path, out: Path, *, config_path=None, model_path=None, us
         "gnss": gnss_counts or {"fixes": 0, "valid": 0, "masked": 0, "jumped": 0, "used": 0},
         "warnings": warning_list,
     }
+    if stride_scales:
+        summary["stride_scales"] = stride_scales  # strides.csv keeps the sources' lengths; the fusion used them x scale
     if gait_forms_info is not None:
         summary["gait_forms"] = gait_forms_info
     gnss_part = f"GNSS {gnss_counts['used']}/{gnss_counts['valid']} fixes used" if gnss_counts else "no GNSS"
