@@ -418,6 +418,7 @@ def test_fuzz_mobgap(seeds, ops, pick):
 
 @FUZZ
 @given(ops=MUTATIONS, pick=st.integers(0, 7), zip_it=st.booleans(), zip_ops=st.none() | BYTE_OPS)
+@example(ops=[("truncate", 0.0)], pick=0, zip_it=True, zip_ops=[("bytes", 0.5, b"\x00", False)])  # zlib.error escaped
 def test_fuzz_sensorlogger(seeds, ops, pick, zip_it, zip_ops):
     fuzz_import("sensorlogger", seeds["sensorlogger"], ops, pick, zip_it=zip_it, zip_ops=zip_ops)
 
@@ -430,6 +431,7 @@ def test_fuzz_sensorlogger_ios(seeds, ops, pick, zip_it):
 
 @FUZZ
 @given(ops=MUTATIONS, pick=st.integers(0, 6), zip_it=st.booleans(), zip_ops=st.none() | BYTE_OPS)
+@example(ops=[("bytes", 0.0, b"\x00", False)], pick=0, zip_it=True, zip_ops=[("bytes", 0.90625, b"\x00", False)])  # zlib
 def test_fuzz_phyphox(seeds, ops, pick, zip_it, zip_ops):
     fuzz_import("phyphox", seeds["phyphox"], ops, pick, zip_it=zip_it, zip_ops=zip_ops)
 

@@ -7,11 +7,13 @@ none of the output folders exists (unless ``force``), and only then writes them 
 from __future__ import annotations
 
 import contextlib
+import lzma
 import re
 import stat
 import tempfile
 import warnings
 import zipfile
+import zlib
 from pathlib import Path, PurePosixPath
 from typing import Iterator
 
@@ -198,7 +200,8 @@ def source_folder(src: Path, what: str) -> Iterator[Path]:
                             raise InputError(f"{what}: expected {info.filename!r} to hold {info.file_size} bytes as declared, "
                                              "found more (a zip bomb?)")
                         fout.write(chunk)
-            except (zipfile.BadZipFile, EOFError, OSError, ValueError, NotImplementedError) as exc:
+            except (zipfile.BadZipFile, EOFError, OSError, ValueError, NotImplementedError, RuntimeError, zlib.error,
+                    lzma.LZMAError) as exc:  # zlib/lzma: a damaged compressed stream
                 raise InputError(f"{what}: expected a complete zip, found a damaged member {info.filename!r} ({exc})") from None
         yield root
 
