@@ -168,8 +168,9 @@ def run(quick: bool = False) -> list[dict]:
             cpu_per_hour[name] = r["cpu_s"] / hours
             rows.append(_row(case, "wall per recording hour", per_hour[name], "s/h", "", "linear cost: constant"))
             rows.append(_row(case, "CPU per recording hour", cpu_per_hour[name], "s/h", "", "linear cost: constant"))
-            for stage in STAGES:
-                rows.append(_row(case, f"stage {stage[:-2]} (wall, timings_s)", summary["timings_s"][stage], "s"))
+            timings = summary["timings_s"]
+            for stage in [s for s in STAGES if s in timings] + sorted(set(timings) - set(STAGES) - {"total_s"}):
+                rows.append(_row(case, f"stage {stage[:-2]} (wall, timings_s)", timings[stage], "s"))
             if sim_s is not None:
                 rows.append(_row(case, "pdr.sim simulation + save (not part of run)", sim_s, "s"))
         if "1 h" in per_hour and longest != "1 h":
