@@ -14,7 +14,7 @@ from pdr.cli.main import main
 from pdr.errors import InputError
 from pdr.gait import amplitude_phase, fourier_coefficients, fourier_derivative, fourier_series, from_amplitude_phase
 from pdr.gait.cycles import MAX_CYCLE_S, foot_cycles, foot_layout, imu_cycles, imu_layout, side_convention
-from pdr.gait.forms import FourierGaitForms, load_forms, speed_kind
+from pdr.gait.forms import PENDULUM_K, FourierGaitForms, load_forms, pendulum_speed_mps, speed_kind
 from pdr.io.recording import load_recording, save_recording
 from pdr.pipelines.gait_forms import classify_forms, recording_cycles
 from pdr.sim.simulator import simulate
@@ -153,6 +153,48 @@ def test_forms_learnt_on_one_walk_name_the_cycles_of_another(sim_recs):
     # smoothing by the transition diagram gives a valid labelling too
     forms.smoothing = True
     assert set(forms.classify(test).labels_) <= set(range(forms.n_forms))
+
+
+def test_pendulum_speed_of_a_compass_gait_cycle():
+    # a trunk that rises and falls by h once per step (the 2nd stride harmonic): z = -h/2 cos(2 phi), so the
+    # vertical acceleration is h/2 (4 pi / T)^2 cos(2 phi); the pendulum gives K 2 sqrt(2 l h - h^2) per step
+    leg, h, dur = np.array([0.9, 0.9, 1.0]), np.array([0.03, 0.05, 0.05]), np.array([1.1, 1.0, 1.2])
+    cyc = pd.DataFrame({c: 0.0 for c in imu_layout() if c.startswith("acc_v_mps2_")}, index=range(3))
+    cyc["acc_v_mps2_a2"] = 0.5 * h * (4 * np.pi / dur) ** 2
+    cyc["duration_s"] = dur
+    want = 2 * PENDULUM_K * 2 * np.sqrt(2 * leg * h - h * h) / dur
+    np.testing.assert_allclose(pendulum_speed_mps(cyc, leg), want, rtol=1e-3)
+    # no vertical acceleration channel (shoe IMU cycles): no speed
+    assert np.isnan(pendulum_speed_mps(cyc.drop(columns="acc_v_mps2_a2"), leg)).all()
+
+
+def test_each_walking_cycle_is_named_by_its_own_froude_number(sim_recs):
+    # regression (issue 7): k-means boundaries did not follow the Froude bands for people unseen in training (a fast
+    # walk with longer steps at a lower cadence fell into the walk form); a level walking cycle is now named by the
+    # Froude number of its inverted-pendulum speed, which needs only the leg length
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        train, test = (recording_cycles(load_recording(p), {}) for p in sim_recs)
+    forms = FourierGaitForms().fit(train)
+    got = forms.classify(test).cycles_forms_
+    walking = np.isin(forms.forms_["kind"].to_numpy(object)[got["form_id"]], ["slow_walk", "walk", "fast_walk"])
+    own = speed_kind(pendulum_speed_mps(test, test["leg_length_m"]), test["leg_length_m"].to_numpy())
+    assert walking.sum() > 50
+    assert np.array_equal(got["kind"][walking], np.where(own == "run", "fast_walk", own)[walking])
+    # the pendulum speed of the simulated person is within 10% of the planned speed while walking (no per-person fit)
+    rec = load_recording(sim_recs[1])
+    ref = rec.reference["steps"]
+    mid = 0.5 * (test["t_start_s"] + test["t_end_s"]).to_numpy()
+    planned = ref["speed_mps"].to_numpy()[np.clip(np.searchsorted(ref["t_s"].to_numpy(), mid), 0, len(ref) - 1)]
+    slow = (planned < 2.0) & walking
+    ratio = np.median(pendulum_speed_mps(test, test["leg_length_m"])[slow] / planned[slow])
+    assert ratio == pytest.approx(1.0, abs=0.1)
+    # per-cycle speed names are at least as accurate as the forms' own names on the straight cycles
+    truth = _truth_kind(rec, test)
+    plain = FourierGaitForms.from_dict({**forms.to_dict(), "params": {**forms.get_params(), "cycle_speed_check": False}})
+    base = plain.classify(test).cycles_forms_["kind"].to_numpy()
+    straight = got["kind"].to_numpy() != "turning"
+    assert (got["kind"].to_numpy() == truth)[straight].mean() >= (base == truth)[straight].mean()
 
 
 def test_cli_round_trip_and_forms_file_errors(sim_recs, tmp_path, capsys):
