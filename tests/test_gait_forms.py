@@ -195,6 +195,10 @@ def test_each_walking_cycle_is_named_by_its_own_froude_number(sim_recs):
     base = plain.classify(test).cycles_forms_["kind"].to_numpy()
     straight = got["kind"].to_numpy() != "turning"
     assert (got["kind"].to_numpy() == truth)[straight].mean() >= (base == truth)[straight].mean()
+    # a sensor off the trunk (a phone in a hand or pocket) does not rise and fall with it: the forms' names stay
+    assert test["trunk_sensor"].all()
+    hand = forms.classify(test.assign(trunk_sensor=False)).cycles_forms_["kind"].to_numpy()
+    np.testing.assert_array_equal(hand, base)
 
 
 def test_cli_round_trip_and_forms_file_errors(sim_recs, tmp_path, capsys):

@@ -464,6 +464,8 @@ class FourierGaitForms(Algorithm):
         leg = np.where(np.isfinite(leg) & (leg > 0), leg, self.leg_length_used_m_)
         speed = pendulum_speed_mps(cycles, leg)
         ok = np.isin(kinds, WALK_KINDS) & np.isfinite(speed)
+        if "trunk_sensor" in cycles.columns:  # a phone in a hand or pocket does not follow the trunk's rise and fall
+            ok &= cycles["trunk_sensor"].to_numpy(bool)
         if not ok.any():
             return kinds
         own = speed_kind(speed[ok], leg[ok])

@@ -38,6 +38,7 @@ MIN_STEPS_PER_MODEL = 30  # fewer matched steps than this do not fit a per-form 
 # run, turns; shoe IMU, a few recordings: level walking, turns, stairs up and down) -- see FourierGaitForms.n_forms
 BODY_N_FORMS = 10
 FOOT_N_FORMS = 6
+TRUNK_PLACEMENTS = ("waist", "trunk")
 GAIT_FORMS_KEYS = {"forms", "forms_file", "n_forms", "smoothing"}
 
 
@@ -52,7 +53,7 @@ def _leg_length_m(rec: Recording) -> float:
 
 def recording_cycles(rec: Recording, config: dict | None = None, *, steps: pd.DataFrame | None = None) -> pd.DataFrame:
     """Gait cycles of ``rec`` with their Fourier features (:mod:`pdr.gait.cycles`) and a ``recording`` and a
-    ``leg_length_m`` column. ``steps``: the steps table with ``step_length_m`` when already computed (``pdr run``)."""
+    ``leg_length_m`` and a ``trunk_sensor`` column. ``steps``: the steps table with ``step_length_m`` when already computed (``pdr run``)."""
     config = config or {}
     feet = foot_imus(rec)
     if feet:
@@ -73,6 +74,7 @@ def recording_cycles(rec: Recording, config: dict | None = None, *, steps: pd.Da
             cycles = imu_cycles(u, estimate_attitude(u), steps, what=f"{rec.id}: gait cycles")
     cycles.insert(0, "recording", rec.id)
     cycles["leg_length_m"] = _leg_length_m(rec)
+    cycles["trunk_sensor"] = rec.placement in TRUNK_PLACEMENTS  # the pendulum speed needs the trunk's excursion
     return cycles.reset_index(drop=True)
 
 
