@@ -107,3 +107,21 @@ def test_short_flow_gaps_do_not_shorten_strides():
     holed = SlipOpticalFlowStride(**est.get_params()).estimate(t, g, np.where(gap, 0.0, q)).strides_.length_m.to_numpy()
     # the lost samples are bridged, not counted as zero flow (which would cut ~10%); the refit itself moves a little
     assert len(holed) == len(full) and np.all(holed / full > 0.97) and np.all(holed / full < 1.15)
+
+
+def test_swing_clearance_follows_the_measured_stride():
+    # the fitted SLIP's own stride saturates near 1.0-1.2 m on rendered walks (true up to 1.6 m); the swing clearance,
+    # which sets the flow-to-metres scale, is taken from the stride measured from the flow instead (a fixed point)
+    est = SlipOpticalFlowStride(camera_from_knee_m=0.3, focal_px=140.0, strides_per_fit=1, scale_windows=1)
+    t, f, _, _ = _measured(est, (1.3, -0.2, math.radians(15), 12000.0))
+    fits = est.estimate(t, f).fits_
+    np.testing.assert_allclose(fits.clearance_stride_m, fits.length_m, rtol=0.01)  # converged, self-consistent
+    lengths = est.strides_.length_m.to_numpy()
+    scaled = SlipOpticalFlowStride(**{**est.get_params(), "length_scale": 1.1}).estimate(t, f).strides_.length_m
+    np.testing.assert_allclose(scaled, 1.1 * lengths, rtol=1e-6)  # the per-user scale stays a pure factor
+    old = SlipOpticalFlowStride(**{**est.get_params(), "clearance_from": "model"}).estimate(t, f)
+    assert "clearance_stride_m" not in old.fits_.columns
+    # the clearance of the measured stride, not of the SLIP's own, sets the scale
+    assert np.all(est.fits_.length_m.to_numpy() != old.fits_.length_m.to_numpy())
+    with pytest.raises(InputError, match="clearance_from"):
+        SlipOpticalFlowStride(clearance_from="thigh").estimate(t, f)

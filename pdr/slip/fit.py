@@ -100,9 +100,15 @@ class SlipOpticalFlowStride(Algorithm):
     swing_ratio : eta, shank swing peak over its toe-off angle (eq. 3.16).
     swing_peak_fraction : where in the swing the shank angle peaks (thesis Appendix E: 1/4).
     swing_profile : "parabola" (thesis eq. 3.17) or "heel" (heel path and inverse kinematics; default).
-    swing_clearance_ratio : c in the peak heel lift of the "heel" swing, c x stride x (stride / leg length)²
-        (a per-user body parameter, see :func:`calibrate_slip_body`; the cubic growth with the stride was read
-        off simulated walks of one user at three speeds: the best constant ratio grew as the stride squared).
+    swing_clearance_ratio : c in the peak heel lift of the "heel" swing, c x stride x (stride / leg length)
+        (a per-user body parameter, see :func:`calibrate_slip_body`). The law used to be cubic in the SLIP's own
+        stride; with the clearance tied to the measured stride (``clearance_from="flow"``) a cubic law makes the
+        fixed point diverge, the quadratic one is stable (see :meth:`_clearance_from_flow`).
+    clearance_from : "flow": the swing clearance follows the stride measured from the flow (fixed point over
+        neighbouring windows; default); "model": the fitted SLIP's own stride (the only choice before, with
+        the cubic law; that stride saturates near 1.0-1.2 m on rendered walks, so long strides were under-read).
+        "flow" acts with ``length_from="flow"`` and the "heel" swing only.
+    clearance_iterations : fixed-point passes of ``clearance_from="flow"``.
     integral_weight : weight of the per-stride mean-flow difference (the image displacement of the stride,
         which fixes the stride length through f / D) relative to the sample-by-sample differences.
     strides_per_fit : strides fitted together (thesis: 2, assumed equal).
@@ -126,7 +132,8 @@ class SlipOpticalFlowStride(Algorithm):
     strides_ : DataFrame ``t_start_s, t_end_s, foot, length_m, length_std_m, source`` (source "leg_camera").
     segments_ : the strides cut from the flow (``t_start_s, t_toe_off_s, t_end_s``).
     fits_ : one row per fitted window: ``vx_mps, vy_mps, leg_angle_rad, stiffness_npm, cost, rms_pxps,
-        sim_duration_s, meas_duration_s, length_m, length_std_m, time_s``.
+        sim_duration_s, meas_duration_s, length_m, length_std_m, m_per_px, meas_disp_px, time_s`` (and with
+        ``clearance_from="flow"`` ``clearance_stride_m``, the stride that set the swing clearance).
 
     Notes
     -----
@@ -150,7 +157,8 @@ class SlipOpticalFlowStride(Algorithm):
                  integral_weight: float = 10.0,
                  strides_per_fit: int = 2,
                  length_from: str = "flow", scale_windows: int = 5, n_refine: int = 2, max_evals: int = 60, duration_weight: float = 0.0, length_scale: float = 1.0,
-                 model_sigma_fraction: float = 0.07, min_quality: float = 0.3, foot: str = "left"):
+                 model_sigma_fraction: float = 0.07, min_quality: float = 0.3, foot: str = "left",
+                 clearance_from: str = "flow", clearance_iterations: int = 4):
         self.thigh_length_m = thigh_length_m
         self.shank_length_m = shank_length_m
         self.foot_length_m = foot_length_m
@@ -172,14 +180,18 @@ class SlipOpticalFlowStride(Algorithm):
         self.model_sigma_fraction = model_sigma_fraction
         self.min_quality = min_quality
         self.foot = foot
+        self.clearance_from = clearance_from
+        self.clearance_iterations = clearance_iterations
 
     # -- model ---------------------------------------------------------------------------------------------------
     @property
     def body(self) -> SlipBody:
         return SlipBody(self.thigh_length_m, self.shank_length_m, self.foot_length_m, self.mass_kg)
 
-    def simulate(self, params, stance_fraction: float, dt_s: float = 0.004):
-        """(tau_s, flow_pxps, stride_length_m, stride_duration_s) of the SLIP stride, or None if it fails."""
+    def simulate(self, params, stance_fraction: float, dt_s: float = 0.004, clearance_stride_m: float | None = None):
+        """(tau_s, flow_pxps, stride_length_m, stride_duration_s) of the SLIP stride, or None if it fails.
+
+        ``clearance_stride_m``: the stride that sets the swing clearance (None: the SLIP's own stride)."""
         vx, vy, delta, k = params
         step = simulate_step(vx, vy, delta, k, self.body)
         if step is None or not 0.2 < step.duration_s < 1.5:
@@ -187,14 +199,15 @@ class SlipOpticalFlowStride(Algorithm):
         kin = stride_kinematics(step, self.body, self.camera_from_knee_m, stance_fraction=stance_fraction,
                                 swing_ratio=self.swing_ratio, swing_peak_fraction=self.swing_peak_fraction,
                                 swing_profile=self.swing_profile,
-                                swing_clearance_m=self._clearance_m(2.0 * step.length_m), dt_s=dt_s)
+                                swing_clearance_m=self._clearance_m(2.0 * step.length_m if clearance_stride_m is None
+                                                                     else clearance_stride_m), dt_s=dt_s)
         if kin.heel_m[:, 1].min() < -0.1 or not np.isfinite(kin.distance_m).all():
             return None  # the swing foot goes through the floor, or the camera looks above the horizon
         return kin.t_s, simulate_flow(kin, self.focal_px), kin.length_m, kin.duration_s
 
     def _clearance_m(self, stride_m: float) -> float:
-        """Peak heel lift of the swing: ratio x stride x (stride / leg length)² (grows with the cube of the stride)."""
-        return self.swing_clearance_ratio * stride_m * (stride_m / self.body.leg_length_m) ** 2
+        """Peak heel lift of the swing: ratio x stride x (stride / leg length) (grows with the square of the stride)."""
+        return self.swing_clearance_ratio * stride_m * (stride_m / self.body.leg_length_m)
 
     def _residuals(self, sim, windows) -> np.ndarray | None:
         """Quality-weighted differences, the simulated stride warped onto each measured stride, and per stride
@@ -234,6 +247,8 @@ class SlipOpticalFlowStride(Algorithm):
             raise InputError("SlipOpticalFlowStride: expected finite, strictly increasing t_s, found unsorted, repeated or NaN times")
         if self.length_from not in ("flow", "model"):
             raise InputError(f"SlipOpticalFlowStride: expected length_from 'flow' or 'model', found {self.length_from!r}")
+        if self.clearance_from not in ("flow", "model"):
+            raise InputError(f"SlipOpticalFlowStride: expected clearance_from 'flow' or 'model', found {self.clearance_from!r}")
         if self.foot not in ("left", "right"):
             raise InputError(f"SlipOpticalFlowStride: expected foot 'left' or 'right', found {self.foot!r}")
         q = np.where(np.isfinite(f) & np.isfinite(q), np.clip(q, 0.0, 1.0), 0.0)
@@ -282,6 +297,8 @@ class SlipOpticalFlowStride(Algorithm):
                 disp = float(np.trapezoid(windows[idx.index(i)][5], windows[idx.index(i)][0]))
                 rows.append((s.t_start_s, s.t_end_s, self.foot, fit["length_m"], fit["length_std_m"], "leg_camera",
                              len(fits) - 1, disp))
+        if fits and self.clearance_from == "flow" and self.length_from == "flow" and self.swing_profile == "heel":
+            self._clearance_from_flow(fits)
         if rows and self.length_from == "flow":
             # each stride its own image displacement, at a flow-to-metres scale smoothed over neighbouring windows
             # (a running median: the body's geometry does not change from one stride to the next, single fits do)
@@ -297,6 +314,33 @@ class SlipOpticalFlowStride(Algorithm):
             self.strides_ = pd.DataFrame(rows, columns=STRIDE_COLUMNS)
         self.fits_ = pd.DataFrame(fits)
         return self
+
+    def _clearance_from_flow(self, fits: list[dict]) -> None:
+        """Re-derive each window's flow-to-metres scale with the swing clearance of the measured stride.
+
+        The fit pins the SLIP's shape, not its stride: on rendered walks its leg angle stays near 14 deg and its own
+        stride near 1.0-1.2 m at every speed (true 1.08-1.44 m), so a clearance taken from the SLIP stride is too low
+        for long strides and jumps between fit minima. The clearance belongs to the stride the camera measures:
+        the fitted states are re-simulated with the clearance of the flow stride (median over neighbouring
+        windows, as for the scale), a few fixed-point passes. The metres per pixel the clearance sets must grow
+        slower than the stride for the fixed point to be stable: with a law cubic in the stride it diverged on
+        rendered walks, quadratic converges in 3-4 passes.
+        """
+        half = max(0, int(self.scale_windows) // 2)
+        for _ in range(max(0, int(self.clearance_iterations))):
+            lengths = np.array([f["length_m"] for f in fits]) / self.length_scale  # the scale stays a pure factor
+            ref = np.array([np.nanmedian(lengths[max(0, j - half):j + half + 1]) for j in range(len(lengths))])
+            for j, f in enumerate(fits):
+                if not (np.isfinite(ref[j]) and f["meas_disp_px"] > 0):
+                    continue
+                p = (f["vx_mps"], f["vy_mps"], f["leg_angle_rad"], f["stiffness_npm"])
+                sim = self.simulate(p, f["stance_fraction"], clearance_stride_m=ref[j])
+                disp = float(np.trapezoid(sim[1], sim[0])) if sim is not None else 0.0
+                if disp <= 0:
+                    continue
+                length_m = sim[2] * f["meas_disp_px"] / disp * self.length_scale
+                f["length_std_m"] *= length_m / f["length_m"]
+                f["length_m"], f["m_per_px"], f["clearance_stride_m"] = length_m, length_m / f["meas_disp_px"], ref[j]
 
     def _grid(self, stance_fraction: float) -> list[tuple]:
         """Coarse grid of SLIP strides (the first stage of the multi-start)."""
@@ -381,6 +425,7 @@ class SlipOpticalFlowStride(Algorithm):
                     rms_pxps=float(np.sqrt(float(r @ r) / max(w.sum(), 1e-9))), sim_duration_s=sim[3],
                     meas_duration_s=tm_total / len(windows), stance_fraction=stance, length_m=length_m,
                     length_std_m=sigma, m_per_px=length_m / meas_disp if meas_disp > 0 else float("nan"),
+                    meas_disp_px=meas_disp,
                     time_s=time.perf_counter() - t0)
 
 
