@@ -21,6 +21,7 @@ from pdr.base import Algorithm
 from pdr.constants import GRAVITY_MPS2
 from pdr.errors import InputError
 from pdr.gait.fourier import DEFAULT_ORDER
+from pdr.io.tomlio import read_json
 
 FORMS_FORMAT = "pdr-gait-forms"
 FORMS_VERSION = 1
@@ -525,11 +526,6 @@ class FourierGaitForms(Algorithm):
 
 def load_forms(path: str | Path) -> tuple[FourierGaitForms, dict[str, Any]]:
     """Read a forms JSON file: the forms and the whole document (for extra sections such as step models)."""
-    path = Path(path)
-    if not path.is_file():
-        raise InputError(f"forms: expected a forms JSON file at {path}, found none")
-    try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise InputError(f"forms {path}: expected JSON, found unreadable content ({exc})") from None
-    return FourierGaitForms.from_dict(doc, f"forms {path}"), doc
+    what = f"forms {path}"
+    doc = read_json(path, what=what, missing="expected a forms JSON file, found none")
+    return FourierGaitForms.from_dict(doc, what), doc

@@ -1,7 +1,9 @@
-"""TOML read (tomllib, data only) and a small writer for the flat tables pdr writes (meta.toml, camera.toml)."""
+"""Data-only readers of TOML (tomllib) and JSON files, and a small writer for the flat tables pdr writes (meta.toml,
+camera.toml)."""
 
 from __future__ import annotations
 
+import json
 import math
 import sys
 from pathlib import Path
@@ -23,6 +25,18 @@ def read_toml(path: str | Path, *, what: str = "TOML file") -> dict[str, Any]:
         return tomllib.loads(path.read_text(encoding="utf-8"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise InputError(f"{what} {path}: expected valid TOML, found {exc}") from None
+
+
+def read_json(path: str | Path, *, what: str, missing: str) -> Any:
+    """The JSON document at ``path``; an InputError ``"{what}: {missing}"`` when there is no file, and one that says
+    the content is unreadable when it is not JSON."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{what}: {missing}")
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise InputError(f"{what}: expected JSON, found unreadable content ({exc})") from None
 
 
 def _value(v: Any) -> str:

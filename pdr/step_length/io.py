@@ -27,6 +27,7 @@ import numpy as np
 from pdr import __version__
 from pdr.errors import InputError
 from pdr.io.atomic import write_text
+from pdr.io.tomlio import read_json
 from pdr.step_length.models import MODELS, RegressionStepLength, StepLengthModel
 
 MODEL_VERSION = 1
@@ -87,14 +88,8 @@ def model_from_dict(doc: Any, what: str = "model") -> StepLengthModel:
 
 def load_model(path: str | Path) -> StepLengthModel:
     """Read a model file written by :func:`save_model`."""
-    path = Path(path)
     what = f"model file {path}"
-    if not path.is_file():
-        raise InputError(f"{what}: expected a JSON file from `pdr calibrate`, found nothing there")
-    try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise InputError(f"{what}: expected JSON, found unreadable content ({exc})") from None
+    doc = read_json(path, what=what, missing="expected a JSON file from `pdr calibrate`, found nothing there")
     return model_from_dict(doc, what)
 
 
