@@ -23,6 +23,7 @@ def _process_umask() -> int:
 # tempfile creates private files (0600) and folders (0700); outputs get the modes of a plain open()/mkdir()
 FILE_MODE = 0o666 & ~_process_umask()
 DIR_MODE = 0o777 & ~_process_umask()
+CSV_DIGITS = 9  # significant digits of the floats in the CSV tables
 
 
 @contextlib.contextmanager
@@ -46,8 +47,8 @@ def write_text(dest: str | Path, text: str) -> None:
         tmp.write_text(text, encoding="utf-8")
 
 
-def write_csv(dest: str | Path, df: pd.DataFrame, *, float_format: str | None = "%.9g") -> None:
-    """CSV with a header row, no index column; floats printed with 9 significant digits (deterministic)."""
+def write_csv(dest: str | Path, df: pd.DataFrame, *, float_format: str | None = f"%.{CSV_DIGITS}g") -> None:
+    """CSV with a header row, no index column; floats printed with ``CSV_DIGITS`` significant digits (deterministic)."""
     with atomic_path(dest) as tmp:
         df.to_csv(tmp, index=False, float_format=float_format, lineterminator="\n")
 

@@ -17,7 +17,7 @@ import pandas as pd
 
 from pdr.constants import GRAVITY_MPS2
 from pdr.errors import InputError
-from pdr.io.atomic import atomic_dir, write_csv, write_text
+from pdr.io.atomic import CSV_DIGITS, atomic_dir, write_csv, write_text
 from pdr.io.tomlio import dumps_toml, read_toml
 
 PLACEMENTS = (
@@ -340,9 +340,6 @@ def load_recording(path: str | Path, *, with_reference: bool = True) -> Recordin
     reference = _load_reference(path / "reference") if with_reference else {}
     return Recording(meta=meta, imu=imu, extra_imus=extra, gnss=gnss, camera=camera, video_path=video,
                      frames=frames, reference=reference, path=path)
-
-
-CSV_DIGITS = 9  # significant digits of the CSV tables (pdr.io.atomic.write_csv)
 
 
 def exact_time_column(df: pd.DataFrame, column: str = "t_s") -> pd.DataFrame:
