@@ -26,6 +26,7 @@ import numpy as np
 import pandas as pd
 
 from pdr.signals.faults import SensorFaultDetection
+from pdr.signals.resample import runs
 
 FAULT_LENGTH_STD_FRACTION = 0.5  # a step length from a faulty accelerometer: +-50% (the spread of human step lengths)
 FAULT_HEADING_CHANGE_STD_RAD = 0.5  # a heading change over a faulty gyroscope: about a quarter turn at 3 sigma per step
@@ -81,20 +82,14 @@ def rejected_gnss(gnss: pd.DataFrame, suspect: np.ndarray, used: np.ndarray, t_f
     t = gnss["t_s"].to_numpy(float)
     valid = np.isfinite(gnss["e_m"].to_numpy()) & np.isfinite(gnss["n_m"].to_numpy()) & ~gnss["masked"].to_numpy(bool)
     candidates = np.flatnonzero(valid & ~suspect & (t >= t_first_s) & (t <= t_last_s))
-    rejected = ~used[candidates]
     out = []
-    start = None
-    for k, r in enumerate(np.append(rejected, False)):
-        if r and start is None:
-            start = k
-        elif not r and start is not None:
-            rows = candidates[start:k]
-            acc = gnss["h_acc_m"].to_numpy(float)[rows]
-            acc_txt = f"reporting h_acc_m {np.nanmin(acc):.1f} m or better" if np.isfinite(acc).any() else "without h_acc_m"
-            out.append({"kind": "gnss_rejected", "sensor": "gnss", "t_start_s": float(t[rows[0]]), "t_end_s": float(t[rows[-1]]),
-                        "message": f"{len(rows)} GNSS fix(es) {acc_txt} disagree with the steps and the other fixes; "
-                                   "left out by the fusion"})
-            start = None
+    for a, b in runs(~used[candidates]):
+        rows = candidates[a:b]
+        acc = gnss["h_acc_m"].to_numpy(float)[rows]
+        acc_txt = f"reporting h_acc_m {np.nanmin(acc):.1f} m or better" if np.isfinite(acc).any() else "without h_acc_m"
+        out.append({"kind": "gnss_rejected", "sensor": "gnss", "t_start_s": float(t[rows[0]]), "t_end_s": float(t[rows[-1]]),
+                    "message": f"{len(rows)} GNSS fix(es) {acc_txt} disagree with the steps and the other fixes; "
+                               "left out by the fusion"})
     return out
 
 
