@@ -64,9 +64,11 @@ def test_templates_learn_forms_and_transition_chain(templates):
     expected = np.eye(4, dtype=bool) | np.eye(4, k=1, dtype=bool) | np.eye(4, k=-1, dtype=bool)
     np.testing.assert_array_equal(templates.transitions_, expected)  # only neighbouring speeds follow each other
     assert np.all(np.diff(templates.phase_rate_radps_) > 0)  # faster forms, higher cadence
+    np.testing.assert_allclose(templates.speed_mps_, [0.8, 1.3, 1.8, 2.9], rtol=0.05)  # the trained speeds
     assert templates.thigh_m_ == pytest.approx(0.245 * 1.75, rel=0.02)
     back = FourierFormTemplates.from_dict(templates.to_dict())
     np.testing.assert_allclose(back.coefficients_, templates.coefficients_)
+    np.testing.assert_allclose(back.speed_mps_, templates.speed_mps_)
     bad = templates.to_dict() | {"params": ["something", "else"]}
     with pytest.raises(InputError, match="expected parameters"):
         FourierFormTemplates.from_dict(bad)
@@ -130,15 +132,32 @@ def test_observation_jacobian_matches_finite_differences(templates):
 def test_prediction_jacobian_matches_finite_differences(templates):
     st, forms = _states(templates, seed=5)
     cov = np.broadcast_to(np.eye(5), (len(st), 5, 5))
-    std = np.array([0.1, 0.1, 0.5, 0.3, 0.5])
-    _, _, g = predict(st, cov, forms, 0.04, templates, std)
+    std = np.array([0.1, 0.1, 0.5, 0.3])
+    _, _, g = predict(st, cov, forms, 0.04, templates, std, 0.08, 0.3)
     num = np.zeros_like(g)
     for k in range(5):
         d = np.zeros(5)
         d[k] = 1e-6
-        num[:, :, k] = (predict(st + d, cov, forms, 0.04, templates, std)[0]
-                        - predict(st - d, cov, forms, 0.04, templates, std)[0]) / 2e-6
+        num[:, :, k] = (predict(st + d, cov, forms, 0.04, templates, std, 0.08, 0.3)[0]
+                        - predict(st - d, cov, forms, 0.04, templates, std, 0.08, 0.3)[0]) / 2e-6
     np.testing.assert_allclose(g, num, atol=1e-7)
+
+
+def test_phase_rate_returns_to_the_form_cadence(templates):
+    # first-order Gauss-Markov: the mean decays to the form's cadence with cadence_tau_s, the variance to the
+    # stationary (cadence_std_fraction x cadence)^2
+    st, _ = _states(templates, seed=6)
+    forms = np.arange(len(st)) % len(templates.forms_)
+    nominal = templates.phase_rate_radps_[forms]
+    st[:, 4] = 0.5 * nominal
+    cov = np.zeros((len(st), 5, 5))
+    std = np.zeros(4)
+    out, cov_bar, _ = predict(st, cov, forms, 0.3, templates, std, 0.08, 0.3)
+    np.testing.assert_allclose(out[:, 4], nominal - 0.5 * nominal * np.exp(-1.0))
+    np.testing.assert_allclose(cov_bar[:, 4, 4], (0.08 * nominal) ** 2 * (1 - np.exp(-2.0)))
+    out, cov_bar, _ = predict(st, cov, forms, 30.0, templates, std, 0.08, 0.3)
+    np.testing.assert_allclose(out[:, 4], nominal)
+    np.testing.assert_allclose(cov_bar[:, 4, 4], (0.08 * nominal) ** 2)
 
 
 def test_ekf_update_information_form_equals_eq_10_11():

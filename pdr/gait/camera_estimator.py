@@ -214,6 +214,7 @@ class FourierFormTemplates:
         path advance per radian of phase, pelvis and hip offsets in the body frame, thigh pitch and roll and knee
         flexion of both legs, all as functions of the phase eta (rad; 0 = left heel strike).
     phase_rate_radps_ : nominal phase rate (cadence, 2*pi per stride) of each form (median).
+    speed_mps_ : nominal walking speed of each form (median path speed; the paper's forms hold the speed, eq. 2).
     transitions_ : (n_forms, n_forms) bool, ``[a, b]`` = form b may follow form a (the diagonal is true).
     thigh_m_, shank_m_ : segment lengths of the subject (median of the training samples).
     n_cycles_ : cycles of training samples per form.
@@ -272,7 +273,7 @@ class FourierFormTemplates:
             rates.append(sub["phase_rate_radps"].to_numpy(float))
         params_df = pd.concat(params, ignore_index=True)
         eta, lab, ok, rate = np.concatenate(phase), np.concatenate(label), np.concatenate(keep), np.concatenate(rates)
-        coef, med_rate, cycles = [], [], []
+        coef, med_rate, med_speed, cycles = [], [], [], []
         for f in forms:
             m = ok & (lab == f)
             n_cyc = float(np.unique(np.floor(eta[m] / TWO_PI)).size) if m.any() else 0.0
@@ -280,6 +281,7 @@ class FourierFormTemplates:
                 raise InputError(f"form templates: expected samples over whole gait cycles of form {f!r}, found {m.sum()} samples")
             coef.append(fourier_coefficients(eta[m], params_df.loc[m, list(PARAMS)].to_numpy(float), self.order))
             med_rate.append(float(np.median(rate[m])))
+            med_speed.append(float(np.median(params_df.loc[m, "rho_m_per_rad"].to_numpy() * rate[m])))
             cycles.append(n_cyc)
         short = [f for f, c in zip(forms, cycles) if c < self.min_cycles]
         if short:
@@ -287,6 +289,7 @@ class FourierFormTemplates:
         self.forms_ = forms
         self.coefficients_ = np.stack(coef)
         self.phase_rate_radps_ = np.array(med_rate)
+        self.speed_mps_ = np.array(med_speed)
         self.transitions_ = trans
         self.thigh_m_ = float(np.median(params_df["thigh_m"]))
         self.shank_m_ = float(np.median(params_df["shank_m"]))
@@ -296,7 +299,7 @@ class FourierFormTemplates:
     # JSON round trip: a fitted template set is the estimator's per-user model
     def to_dict(self) -> dict[str, Any]:
         return {"order": self.order, "forms": self.forms_, "params": list(PARAMS),
-                "coefficients": self.coefficients_.tolist(), "phase_rate_radps": self.phase_rate_radps_.tolist(),
+                "coefficients": self.coefficients_.tolist(), "phase_rate_radps": self.phase_rate_radps_.tolist(), "speed_mps": self.speed_mps_.tolist(),
                 "transitions": self.transitions_.astype(int).tolist(), "thigh_m": self.thigh_m_, "shank_m": self.shank_m_}
 
     @classmethod
@@ -307,6 +310,7 @@ class FourierFormTemplates:
         out.forms_ = list(d["forms"])
         out.coefficients_ = np.asarray(d["coefficients"], float)
         out.phase_rate_radps_ = np.asarray(d["phase_rate_radps"], float)
+        out.speed_mps_ = np.asarray(d["speed_mps"], float)
         out.transitions_ = np.asarray(d["transitions"], bool)
         out.thigh_m_, out.shank_m_ = float(d["thigh_m"]), float(d["shank_m"])
         out.n_cycles_ = {}
@@ -429,23 +433,30 @@ def joint_positions(state: np.ndarray, form: np.ndarray, templates: FourierFormT
 
 
 def predict(state: np.ndarray, cov: np.ndarray, form: np.ndarray, dt_s: float, templates: FourierFormTemplates,
-            process_std: np.ndarray):
+            process_std: np.ndarray, cadence_std_fraction: float, cadence_tau_s: float):
     """State prediction g (eq. 1, 4, 5) over ``dt_s`` in the given forms, its Jacobian G and the predicted
-    covariance (eq. 9). ``process_std``: white-noise densities of (x, y, heading, phase, phase rate) per sqrt(s),
-(5,) or per candidate (B, 5)."""
+    covariance (eq. 9). ``process_std``: white-noise densities of (x, y, heading, phase) per sqrt(s), (4,) or per
+    candidate (B, 4). The phase rate returns to the form's cadence (a first-order Gauss-Markov process with time
+    constant ``cadence_tau_s`` and a spread of ``cadence_std_fraction`` of the cadence): a form walks at its own
+    pace (the paper's forms have their own periods, Fig. 9), give or take the step-to-step timing."""
     x, y, xi, eta, rate = state.T
     rho = templates.evaluate(form, eta)[:, _P["rho_m_per_rad"]]
     drho = templates.evaluate(form, eta, derivative=True)[:, _P["rho_m_per_rad"]]
+    nominal = templates.phase_rate_radps_[np.asarray(form, int)]
+    keep = np.exp(-dt_s / cadence_tau_s)
     step = rho * rate * dt_s
     c, s = np.cos(xi), np.sin(xi)
-    out = np.stack([x + step * c, y + step * s, xi, eta + rate * dt_s, rate], -1)
+    out = np.stack([x + step * c, y + step * s, xi, eta + rate * dt_s, nominal + keep * (rate - nominal)], -1)
     g = np.broadcast_to(np.eye(5), (len(state), 5, 5)).copy()
     g[:, 0, 2], g[:, 1, 2] = -step * s, step * c
     g[:, 0, 3], g[:, 1, 3] = drho * rate * dt_s * c, drho * rate * dt_s * s
     g[:, 0, 4], g[:, 1, 4] = rho * dt_s * c, rho * dt_s * s
     g[:, 3, 4] = dt_s
-    p_std = np.broadcast_to(process_std, (len(state), 5))
-    cov_bar = g @ cov @ np.swapaxes(g, 1, 2) + np.einsum("bi,ij->bij", p_std**2 * dt_s, np.eye(5))
+    g[:, 4, 4] = keep
+    var = np.empty((len(state), 5))
+    var[:, :4] = np.broadcast_to(process_std, (len(state), 4)) ** 2 * dt_s
+    var[:, 4] = (cadence_std_fraction * nominal) ** 2 * (1.0 - keep**2)
+    cov_bar = g @ cov @ np.swapaxes(g, 1, 2) + np.einsum("bi,ij->bij", var, np.eye(5))
     return out, cov_bar, g
 
 
@@ -512,15 +523,15 @@ class WearableCameraGaitEstimation:
         outlier (a mismatched corner): capped in eq. 7 and left out of the update.
     position_noise_mps, heading_noise_radps, phase_noise_radps : process noise P (eq. 9) as white-noise
         densities (per sqrt(s)) of x/y, heading and phase.
-    phase_rate_noise_radps2 : process noise of the phase rate (random walk, eq. 5 + noise): cadence changes of
-        about 1 rad/s over a step when the form changes.
-    cadence_std_fraction, cadence_tau_s : the weight of a candidate (eq. 6) is multiplied by a cadence factor
-        kappa, the Gaussian of its phase rate about its form's cadence with this relative spread (per-step timing,
-        speeds between the stored ones), counted once per ``cadence_tau_s`` (the rate is correlated over about a
-        step). 0: off, the paper's weight. The image alone tells nearby forms apart poorly (a wrong form's pose is
-        absorbed by a shifted phase); the cadence, part of what a form is (the paper's Fig. 9: the forms' periods
-        differ), does. The phase rate itself follows the images (eq. 5), so that kappa judges the data, not a
-        prior.
+    cadence_std_fraction, speed_std_fraction, cadence_tau_s : a form walks at its own cadence and speed, give or
+        take these fractions (step-to-step timing, speeds between the stored forms). The phase rate is predicted
+        to return to the form's cadence with the time constant ``cadence_tau_s`` (about one step), and the weight
+        of a candidate (eq. 6) is multiplied by a pace factor kappa: the Gaussian of the cadence and speed it
+        has shown over about the last step (phase and path advance per second, the EKF corrections included)
+        about its form's, counted once per ``cadence_tau_s``. A fraction of 0 leaves that part out. The image
+        alone tells nearby forms apart poorly (the stored form misses a real step by 20-30 px at the true
+        state, and a wrong form's pose is absorbed by a shifted phase); the pace, part of what a form is (the
+        paper's forms hold the speed, eq. 2, and have their own periods, Fig. 9), does.
     initial_position_std_m, initial_heading_std_rad : uncertainty of the start pose given to :meth:`estimate`
         (and of the pose kept when the track is lost).
     lost_error_sigmas, lost_frames : the track is lost when the best candidate's mean re-projection error after
@@ -553,10 +564,12 @@ class WearableCameraGaitEstimation:
 
     - Q of eq. 10 holds, besides the pixel noise, one camera pose error shared by all points of a frame. With
       independent pixel noise only, sixty points overrule the gait model and the state bends to fit each step.
-    - lambda (eq. 7) is counted once per ``error_correlation_s`` and the weight has a cadence factor kappa
+    - lambda (eq. 7) is counted once per ``error_correlation_s`` and the weight has a pace factor kappa
       (w = C lambda kappa w_prev): a wrong form's pose is absorbed by a shifted phase within a few frames, so
-      per-frame image evidence alone flips between neighbouring forms; the phase rate, followed freely by
-      the images (eq. 5), tells them apart.
+      per-frame image evidence alone flips between neighbouring forms; the cadence and speed seen over the
+      last step tell them apart. The phase rate returns to the form's cadence (eq. 5 with a first-order
+      Gauss-Markov rate instead of a random walk): with a free rate, the phase sank behind the truth by up to
+      3 rad over slow steps while the re-projection error stayed under 15 px.
     - resampling keeps the heaviest candidate of every form (``keep_every_form``); a lost track (error
       above ``lost_error_sigmas`` x sigma for ``lost_frames`` frames) is searched again over phase and form
       around the current pose, keeping the forms' weights. Near the turning points of the thigh swing the phase
@@ -580,8 +593,8 @@ class WearableCameraGaitEstimation:
                  likelihood_mean_px: float = 0.0, mean_form_duration_s: float = 3.0, pixel_std_px: float = 1.5,
                  template_rotation_std_deg: float = 3.0, template_position_std_m: float = 0.01,
                  gate_px: float = 12.0, position_noise_mps: float = 0.1, heading_noise_radps: float = 0.5,
-                 phase_noise_radps: float = 0.3, phase_rate_noise_radps2: float = 1.0,
-                 cadence_std_fraction: float = 0.08, cadence_tau_s: float = 0.5,
+                 phase_noise_radps: float = 0.3,
+                 cadence_std_fraction: float = 0.08, cadence_tau_s: float = 0.3, speed_std_fraction: float = 0.1,
                  initial_position_std_m: float = 0.2, initial_heading_std_rad: float = 0.15,
                  lost_error_sigmas: float = 4.0, lost_frames: int = 5):
         self.templates = templates
@@ -601,9 +614,9 @@ class WearableCameraGaitEstimation:
         self.position_noise_mps = position_noise_mps
         self.heading_noise_radps = heading_noise_radps
         self.phase_noise_radps = phase_noise_radps
-        self.phase_rate_noise_radps2 = phase_rate_noise_radps2
         self.cadence_std_fraction = cadence_std_fraction
         self.cadence_tau_s = cadence_tau_s
+        self.speed_std_fraction = speed_std_fraction
         self.initial_position_std_m = initial_position_std_m
         self.initial_heading_std_rad = initial_heading_std_rad
         self.lost_error_sigmas = lost_error_sigmas
@@ -638,15 +651,17 @@ class WearableCameraGaitEstimation:
         rest = order[~np.isin(order, best_each)]
         return np.concatenate([best_each, rest])[: max(self.n_candidates, len(best_each))]
 
-    def _log_kappa(self, rate, form, dt_s):
-        """log of the cadence factor kappa: the candidate's phase rate against its form's cadence (Gaussian,
-        ``cadence_std_fraction``), counted once per ``cadence_tau_s`` (the rate is correlated over that
-        time, so each frame carries dt / tau of it)."""
-        if not self.cadence_std_fraction:
-            return 0.0
-        nominal = self.templates.phase_rate_radps_[form]
-        z = (rate - nominal) / (self.cadence_std_fraction * nominal)
-        return -0.5 * z * z * (dt_s / self.cadence_tau_s)
+    def _log_kappa(self, seen, form, dt_s):
+        """log of the pace factor kappa: the cadence and speed seen over about the last step (``seen``, (B, 2):
+        phase advance in rad/s and path advance in m/s, corrections included) against the form's own (Gaussian,
+        ``cadence_std_fraction`` and ``speed_std_fraction`` of them), counted once per ``cadence_tau_s``. Nothing
+        seen yet (NaN): no evidence."""
+        tp = self.templates
+        nominal = np.stack([tp.phase_rate_radps_[form], tp.speed_mps_[form]], -1)
+        spread = np.array([self.cadence_std_fraction, self.speed_std_fraction])
+        with np.errstate(invalid="ignore", divide="ignore"):
+            z = np.nan_to_num((seen - nominal) / (spread * nominal), nan=0.0, posinf=0.0, neginf=0.0)
+        return -0.5 * (z * z).sum(axis=1) * (dt_s / self.cadence_tau_s)
 
     def _log_lambda(self, capped_err):
         """log of eq. 7 (without the constant): mean capped re-projection error per candidate, counted once per
@@ -701,8 +716,7 @@ class WearableCameraGaitEstimation:
         t0 = time.perf_counter()
         n_forms = len(tp.forms_)
         log_c = float(np.log(max(self.mean_form_duration_s * self.camera.fps, 1.0)))
-        pstd = np.array([self.position_noise_mps, self.position_noise_mps, self.heading_noise_radps,
-                         self.phase_noise_radps, self.phase_rate_noise_radps2])
+        pstd = np.array([self.position_noise_mps, self.position_noise_mps, self.heading_noise_radps, self.phase_noise_radps])
         allowed = tp.transitions_ | np.eye(n_forms, dtype=bool)
         out_state = np.zeros((len(t), 5))
         out_form = np.zeros(len(t), int)
@@ -710,7 +724,7 @@ class WearableCameraGaitEstimation:
         out_in = np.zeros(len(t), int)
         out_err = np.full(len(t), np.nan)
         n_pred_only = n_relocalised = lost = 0
-        state = cov = form = logw = None
+        state = cov = form = logw = seen = None
         for i in range(len(t)):
             sl = slice(bounds[i], bounds[i + 1])
             pts, uv = world[sl], uv_all[sl]
@@ -725,6 +739,7 @@ class WearableCameraGaitEstimation:
                     out_form[i] = -1
                     continue
                 state, cov, form, logw = self._initial(pts, uv, initial_e_m, initial_n_m, initial_heading_rad)
+                seen = np.full((len(state), 2), np.nan)
             else:
                 dt = t[i] - t[i - 1]
                 if enough:
@@ -732,9 +747,11 @@ class WearableCameraGaitEstimation:
                 else:  # no evidence to change form: predict only
                     parent, child = np.arange(len(form)), form
                     n_pred_only += 1
-                s_bar, c_bar, _ = predict(state[parent], cov[parent], child, dt, tp, pstd)
+                s_bar, c_bar, _ = predict(state[parent], cov[parent], child, dt, tp, pstd, self.cadence_std_fraction,
+                                          self.cadence_tau_s)
                 lw = logw[parent] + log_c * (child == form[parent])
-                lw = lw + self._log_kappa(s_bar[:, 4], child, dt)
+                lw = lw + self._log_kappa(seen[parent], child, dt)
+                before, seen_before = state[parent], seen[parent]
                 if enough:
                     _, _, err, _ = self._residuals(s_bar, child, pts, uv, jacobian=False)
                     lw = lw + self._log_lambda(err)
@@ -742,8 +759,13 @@ class WearableCameraGaitEstimation:
                     res, jac, _, inl = self._residuals(s_bar[keep], child[keep], pts, uv)
                     state, cov = self._update(s_bar[keep], c_bar[keep], res, jac, inl)
                     form, logw = child[keep], lw[keep]
+                    before, seen_before = before[keep], seen_before[keep]
                 else:
                     state, cov, form, logw = s_bar, c_bar, child, lw
+                # the pace seen: phase and path advance per second, corrections included, smoothed over a step
+                advance = np.stack([state[:, 3] - before[:, 3], np.hypot(*(state[:, :2] - before[:, :2]).T)], -1) / dt
+                gain = min(dt / self.cadence_tau_s, 1.0)
+                seen = np.where(np.isfinite(seen_before), seen_before + gain * (advance - seen_before), advance)
             logw = logw - logw.max()
             best = int(np.argmax(logw))
             if enough:
@@ -758,7 +780,9 @@ class WearableCameraGaitEstimation:
                     b = state[best]
                     memory = np.full(n_forms, logw.min() - log_c)  # the forms' weights so far are kept
                     np.maximum.at(memory, form, logw)
+                    seen_best = seen[best]
                     state, cov, form, logw = self._initial(pts, uv, b[0], b[1], b[2], b[4], memory, b[3])
+                    seen = np.tile(seen_best, (len(state), 1))
                     logw = logw - logw.max()
                     best, lost = 0, 0
                     n_relocalised += 1
