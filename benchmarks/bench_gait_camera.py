@@ -54,7 +54,7 @@ def estimate(sim: ThighCameraWalk, templates: FourierFormTemplates, start_error=
 def score(sim: ThighCameraWalk, est: WearableCameraGaitEstimation) -> dict[str, float]:
     """Joint, position, heading errors; form accuracy per true cycle (the form held for most of its frames);
     form switches found within one cycle (an estimated cycle of the new form starting within one cycle of the
-    true change); speed."""
+    true change, one cycle being the true cycle in progress at the change); speed."""
     tr, st = sim.truth, est.states_
     err = np.mean([np.linalg.norm(est.joints_[[f"{j}_{a}_m" for a in "enu"]].to_numpy() - tr[[f"{j}_{a}_m" for a in "enu"]].to_numpy(), axis=1)
                    for j in JOINTS], axis=0)
@@ -75,8 +75,11 @@ def score(sim: ThighCameraWalk, est: WearableCameraGaitEstimation) -> dict[str, 
         tb, new = float(seg.t_start_s.iloc[k]), seg.form.iloc[k]
         if not (t[0] + cyc_len < tb < t[-1] - cyc_len):
             continue
-        later = ec[(ec.t_start_s >= tb - cyc_len) & (ec.form == new)]
-        found.append(bool(len(later)) and float(later.t_start_s.iloc[0]) <= tb + cyc_len)
+        # one cycle: the true cycle in progress at the change (a slow-walk cycle lasts 1.6 s, a running one 0.8 s)
+        at = sim.cycles[(sim.cycles.t_start_s <= tb) & (sim.cycles.t_end_s > tb)]
+        one = float((at.t_end_s - at.t_start_s).iloc[0]) if len(at) else cyc_len
+        later = ec[(ec.t_start_s >= tb - one) & (ec.form == new)]
+        found.append(bool(len(later)) and float(later.t_start_s.iloc[0]) <= tb + one)
     dpsi = np.angle(np.exp(1j * (st.heading_rad - tr.heading_rad).to_numpy()))
     return {"joint_mean_m": float(np.nanmean(err)), "joint_p95_m": float(np.nanpercentile(err, 95)),
             "position_m": float(np.nanmean(np.hypot(st.e_m - tr.e_m, st.n_m - tr.n_m))),

@@ -21,6 +21,7 @@ from pdr.gait.camera_estimator import (
     _camera_in_body,
     ekf_update,
     joint_positions,
+    most_likely_forms,
     predict,
     project_points,
 )
@@ -158,6 +159,28 @@ def test_phase_rate_returns_to_the_form_cadence(templates):
     out, cov_bar, _ = predict(st, cov, forms, 30.0, templates, std, 0.08, 0.3)
     np.testing.assert_allclose(out[:, 4], nominal)
     np.testing.assert_allclose(cov_bar[:, 4, 4], (0.08 * nominal) ** 2)
+
+
+def test_most_likely_forms_place_the_switch_where_the_evidence_turns():
+    # forward max-product scores of two forms that may follow each other: form 1's evidence starts at frame 40
+    # (gain 0.5 per frame); the filter's leader changes only once that outweighs the bonus for staying
+    log_c, n = 3.0, 80
+    gain = np.where(np.arange(n) < 40, np.array([[0.5], [0.0]]), np.array([[0.0], [0.5]])).T
+    score = np.zeros((n, 2))
+    for i in range(1, n):
+        stay = score[i - 1] + log_c
+        switch = score[i - 1][::-1]
+        score[i] = np.maximum(stay, switch) + gain[i]
+        score[i] -= score[i].max()
+    score[5, :] = score[5, ::-1]  # a one-frame flicker of the leader
+    online = np.argmax(score, axis=1)
+    assert np.flatnonzero(online == 1)[-1] == n - 1 and online[40] == 0  # online: late
+    path = most_likely_forms(score, np.ones((2, 2), bool), log_c)
+    np.testing.assert_array_equal(path, (np.arange(n) >= 40).astype(int))  # no flicker, switch at frame 40
+    assert most_likely_forms(np.full((3, 2), -np.inf), np.ones((2, 2), bool), log_c).tolist() == [-1, -1, -1]
+    # a transition the diagram does not allow is never taken
+    path = most_likely_forms(score, np.eye(2, dtype=bool), log_c)
+    assert len(np.unique(path)) == 1
 
 
 def test_ekf_update_information_form_equals_eq_10_11():

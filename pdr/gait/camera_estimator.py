@@ -538,11 +538,16 @@ class WearableCameraGaitEstimation:
         the update exceeds this many ``likelihood_sigma_px`` for this many frames in a row; phase and form are
         then searched again (as at the start) around the current position and heading. Near a turning point of
         the thigh swing the phase is locally unobservable and a lagging phase can be held there by the update.
+    smooth_forms : True: the output forms are the most likely sequence given the whole walk
+        (:func:`most_likely_forms`, Viterbi backtracking over the filter's per-form scores), and each frame's
+        state is the heaviest candidate of its form; False: the heaviest candidate of each frame, online (the
+        paper).
 
     Attributes
     ----------
     states_ : per frame ``t_s, e_m, n_m, heading_rad, phase_rad, phase_rate_radps, form, n_points, n_inliers,
-        reprojection_error_px`` (of the best candidate after the update; ``n_points`` 0: predicted only).
+        reprojection_error_px`` (of the output candidate after the update, see ``smooth_forms``; ``n_points`` 0:
+        predicted only).
     joints_ : per frame ``t_s`` and ``<joint>_{e,n,u}_m`` for ``JOINTS`` (the estimated body pose).
     cycles_ : estimated gait cycles (phase from one multiple of 2 pi to the next) ``t_start_s, t_end_s, form``
         (the form held for most of the cycle).
@@ -574,6 +579,9 @@ class WearableCameraGaitEstimation:
       above ``lost_error_sigmas`` x sigma for ``lost_frames`` frames) is searched again over phase and form
       around the current pose, keeping the forms' weights. Near the turning points of the thigh swing the phase
       is locally unobservable and a lagging phase can be held there by the update.
+    - by default the forms are smoothed over the whole walk (``smooth_forms``): the online choice switches
+      only once the new form's evidence outweighs the bonus C, about half a cycle late, and a passing mismatch
+      can flip it for a few frames.
     - outlier gating (the paper had clean chessboard correspondences); the information form of eq. 10 (fewer
       operations, same result); the unknown initial phase is searched on a grid with three iterated updates per
       trial (the paper does not say how it starts); the heading has no turn template (turns are followed through
@@ -596,7 +604,7 @@ class WearableCameraGaitEstimation:
                  phase_noise_radps: float = 0.3,
                  cadence_std_fraction: float = 0.08, cadence_tau_s: float = 0.3, speed_std_fraction: float = 0.1,
                  initial_position_std_m: float = 0.2, initial_heading_std_rad: float = 0.15,
-                 lost_error_sigmas: float = 4.0, lost_frames: int = 5):
+                 lost_error_sigmas: float = 4.0, lost_frames: int = 5, smooth_forms: bool = True):
         self.templates = templates
         self.camera = camera
         self.n_candidates = n_candidates
@@ -617,6 +625,7 @@ class WearableCameraGaitEstimation:
         self.cadence_std_fraction = cadence_std_fraction
         self.cadence_tau_s = cadence_tau_s
         self.speed_std_fraction = speed_std_fraction
+        self.smooth_forms = smooth_forms
         self.initial_position_std_m = initial_position_std_m
         self.initial_heading_std_rad = initial_heading_std_rad
         self.lost_error_sigmas = lost_error_sigmas
@@ -713,6 +722,13 @@ class WearableCameraGaitEstimation:
             raise InputError("thigh camera observations: expected finite pixel and world coordinates, found NaN/inf")
         bounds = np.searchsorted(fr, np.arange(len(t) + 1))
 
+        def frame_points(i):
+            pts, uv = world[bounds[i]:bounds[i + 1]], uv_all[bounds[i]:bounds[i + 1]]
+            if len(pts) > self.max_points:  # an even spread over the detections
+                pick = np.linspace(0, len(pts) - 1, self.max_points).round().astype(int)
+                pts, uv = pts[pick], uv[pick]
+            return pts, uv
+
         t0 = time.perf_counter()
         n_forms = len(tp.forms_)
         log_c = float(np.log(max(self.mean_form_duration_s * self.camera.fps, 1.0)))
@@ -723,14 +739,12 @@ class WearableCameraGaitEstimation:
         out_n = np.zeros(len(t), int)
         out_in = np.zeros(len(t), int)
         out_err = np.full(len(t), np.nan)
+        form_score = np.full((len(t), n_forms), -np.inf)  # per frame, the heaviest candidate of each form
+        form_state = np.full((len(t), n_forms, 5), np.nan)
         n_pred_only = n_relocalised = lost = 0
         state = cov = form = logw = seen = None
         for i in range(len(t)):
-            sl = slice(bounds[i], bounds[i + 1])
-            pts, uv = world[sl], uv_all[sl]
-            if len(pts) > self.max_points:  # an even spread over the detections
-                pick = np.linspace(0, len(pts) - 1, self.max_points).round().astype(int)
-                pts, uv = pts[pick], uv[pick]
+            pts, uv = frame_points(i)
             enough = len(pts) >= MIN_POINTS
             if state is None:
                 if not enough:  # nothing to start from yet
@@ -763,18 +777,15 @@ class WearableCameraGaitEstimation:
                 else:
                     state, cov, form, logw = s_bar, c_bar, child, lw
                 # the pace seen: phase and path advance per second, corrections included, smoothed over a step
-                advance = np.stack([state[:, 3] - before[:, 3], np.hypot(*(state[:, :2] - before[:, :2]).T)], -1) / dt
+                step = state[:, :2] - before[:, :2]  # along the heading: unbiased by the jitter of the corrections
+                forward = np.cos(state[:, 2]) * step[:, 0] + np.sin(state[:, 2]) * step[:, 1]
+                advance = np.stack([state[:, 3] - before[:, 3], forward], -1) / dt
                 gain = min(dt / self.cadence_tau_s, 1.0)
                 seen = np.where(np.isfinite(seen_before), seen_before + gain * (advance - seen_before), advance)
             logw = logw - logw.max()
             best = int(np.argmax(logw))
             if enough:
-                h, depth = project_points(state[best:best + 1], form[best:best + 1], pts, tp, self.camera)
-                e = np.hypot(*(uv - h[0]).T)
-                e = np.where(depth[0] > 0, e, np.inf)
-                gate = max(self.gate_px, 3.0 * float(np.median(np.minimum(e, 1e6))))
-                out_n[i], out_in[i] = len(pts), int((e <= gate).sum())
-                out_err[i] = float(np.mean(e[e <= gate])) if (e <= gate).any() else np.nan
+                out_n[i], out_in[i], out_err[i] = self._fit(state[best], form[best], pts, uv)
                 lost = lost + 1 if not out_err[i] <= self.lost_error_sigmas * self.likelihood_sigma_px else 0
                 if lost >= self.lost_frames:  # track lost: search phase and form again around the pose
                     b = state[best]
@@ -787,6 +798,16 @@ class WearableCameraGaitEstimation:
                     best, lost = 0, 0
                     n_relocalised += 1
             out_state[i], out_form[i] = state[best], form[best]
+            top = np.argsort(-logw, kind="stable")
+            top = top[np.unique(form[top], return_index=True)[1]]
+            form_score[i, form[top]], form_state[i, form[top]] = logw[top], state[top]
+        if self.smooth_forms:
+            for i, f in enumerate(most_likely_forms(form_score, allowed, log_c)):
+                if f >= 0 and f != out_form[i]:
+                    out_state[i], out_form[i] = form_state[i, f], f
+                    pts, uv = frame_points(i)
+                    if len(pts) >= MIN_POINTS:
+                        out_n[i], out_in[i], out_err[i] = self._fit(out_state[i], f, pts, uv)
         self.time_s_ = time.perf_counter() - t0
         self.n_predicted_only_ = n_pred_only
         self.n_relocalised_ = n_relocalised
@@ -807,16 +828,24 @@ class WearableCameraGaitEstimation:
         self.cycles_ = cycles_from_phase(t, out_state[:, 3], self.states_["form"].to_numpy())
         return self
 
+    def _fit(self, state, form, pts, uv):
+        """Points, inliers and mean inlier re-projection error (px) of one state in one form."""
+        h, depth = project_points(state[None], np.array([form]), pts, self.templates, self.camera)
+        e = np.where(depth[0] > 0, np.hypot(*(uv - h[0]).T), np.inf)
+        inlier = e <= max(self.gate_px, 3.0 * float(np.median(np.minimum(e, 1e6))))
+        return len(pts), int(inlier.sum()), float(np.mean(e[inlier])) if inlier.any() else np.nan
+
     def _initial(self, pts, uv, e0, n0, psi0, rate0=None, log_prior=None, phase0=0.0):
         """Candidates on a grid of phases in every form at the start pose (with the forms' cadences, or
         ``rate0``), each corrected by three iterated updates, weighted by eq. 7 on the corrected errors (plus the
-        forms' ``log_prior``); the best ``n_candidates`` are kept. The grid phases are placed nearest to
-        ``phase0`` (so that a search during the walk keeps the count of cycles)."""
+        forms' ``log_prior``); the best ``n_candidates`` are kept. The grid phases run from a quarter cycle
+        behind ``phase0`` to three quarters ahead, so that a search during the walk keeps the count of cycles: a
+        lost track has lagged (its phase held at a turning point of the thigh while the walker went on)."""
         tp = self.templates
         n_forms, n_ph = len(tp.forms_), self.n_initial_phases
         form = np.repeat(np.arange(n_forms), n_ph)
         eta = np.tile(TWO_PI * np.arange(n_ph) / n_ph, n_forms)
-        eta = phase0 + np.angle(np.exp(1j * (eta - phase0)))
+        eta = phase0 - 0.25 * TWO_PI + np.mod(eta - phase0 + 0.25 * TWO_PI, TWO_PI)
         rate = tp.phase_rate_radps_[form] if rate0 is None else np.full(len(form), rate0)
         state = np.stack([np.full(len(form), e0), np.full(len(form), n0), np.full(len(form), psi0), eta, rate], -1)
         std = np.stack([np.full(len(form), self.initial_position_std_m), np.full(len(form), self.initial_position_std_m),
@@ -840,6 +869,27 @@ class WearableCameraGaitEstimation:
         self.n_predicted_only_ = 0
         self.n_relocalised_ = 0
         self.time_s_ = 0.0
+
+
+def most_likely_forms(form_score: np.ndarray, allowed: np.ndarray, log_stay: float) -> np.ndarray:
+    """The most likely sequence of forms given the whole walk (Viterbi backtracking): ``form_score`` (frames,
+    forms) holds, per frame, the log weight of the heaviest candidate of each form (the filter's max-product
+    forward score; -inf: none), ``allowed[a, b]`` whether form b may follow form a, ``log_stay`` the bonus C for
+    staying (eq. 6). From the best form of the last frame, each earlier frame takes the form whose score plus the
+    transition into the later frame's form is highest. -1 where no candidate exists."""
+    n = len(form_score)
+    out = np.full(n, -1)
+    log_t = np.where(allowed, 0.0, -np.inf) + log_stay * np.eye(len(allowed))
+    started = np.isfinite(form_score).any(axis=1)
+    if not started.any():
+        return out
+    last = int(np.flatnonzero(started)[-1])
+    out[last] = int(np.argmax(form_score[last]))
+    for i in range(last - 1, -1, -1):
+        if not started[i]:
+            break
+        out[i] = int(np.argmax(form_score[i] + log_t[:, out[i + 1]]))
+    return out
 
 
 def cycles_from_phase(t_s: np.ndarray, phase_rad: np.ndarray, form: np.ndarray) -> pd.DataFrame:
