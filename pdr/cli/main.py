@@ -104,6 +104,20 @@ def _cmd_gait_forms(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_gait_camera(args: argparse.Namespace) -> int:
+    from pdr.pipelines import gait_camera
+
+    if args.action == "simulate":
+        print(gait_camera.simulate_thigh_camera_to_disk(Path(args.config), Path(args.output), seed=args.seed, force=args.force))
+    elif args.action == "fit":
+        print(gait_camera.fit_templates([Path(m) for m in args.mocap], Path(args.output)))
+    elif args.action == "estimate":
+        print(gait_camera.estimate_gait(Path(args.folder), Path(args.templates), Path(args.output), force=args.force))
+    else:
+        print(json.dumps(gait_camera.evaluate_gait(Path(args.out), Path(args.folder)), indent=2, sort_keys=True))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="pdr", description="Pedestrian dead reckoning by sensor fusion.")
     parser.add_argument("--version", action="version", version=f"pdr {__version__}")
@@ -182,6 +196,26 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--forms", required=True)
     g.add_argument("-o", "--output", required=True)
     p.set_defaults(func=_cmd_gait_forms)
+
+    p = sub.add_parser("gait-camera", help="walking state, form and body pose from a thigh camera (Watanabe et al.)")
+    gsub = p.add_subparsers(dest="action", required=True)
+    g = gsub.add_parser("simulate", help="a simulated thigh-camera folder with its reference/")
+    g.add_argument("config")
+    g.add_argument("-o", "--output", required=True)
+    g.add_argument("--seed", type=int, default=0)
+    g.add_argument("--force", action="store_true")
+    g = gsub.add_parser("fit", help="per-form templates from motion-capture tables (one walk per file)")
+    g.add_argument("mocap", nargs="+")
+    g.add_argument("-o", "--output", required=True)
+    g = gsub.add_parser("estimate", help="track a thigh-camera folder")
+    g.add_argument("folder")
+    g.add_argument("--templates", required=True)
+    g.add_argument("-o", "--output", required=True)
+    g.add_argument("--force", action="store_true")
+    g = gsub.add_parser("evaluate", help="metrics of an estimate against the folder's reference/")
+    g.add_argument("out")
+    g.add_argument("folder")
+    p.set_defaults(func=_cmd_gait_camera)
     return parser
 
 
