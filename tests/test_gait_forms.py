@@ -284,6 +284,19 @@ def test_run_uses_per_form_step_models(sim_recs, tmp_path):
     cfg.write_text('[gait_forms]\nforms = "missing.json"\n')
     with pytest.raises(InputError, match="forms JSON file"):
         run_recording(sim_recs[1], tmp_path / "out_bad", config_path=cfg)
+    cfg.write_text('[gait_forms]\nforms = "forms.json"\ncycle_speed_chek = false\n')
+    with pytest.raises(InputError, match="cycle_speed_chek"):
+        run_recording(sim_recs[1], tmp_path / "out_bad", config_path=cfg)
+
+
+def test_classification_settings_from_the_configuration(sim_recs, tmp_path):
+    cfg = tmp_path / "fit.toml"
+    cfg.write_text("[gait_forms]\ncycle_speed_check = false\nsmoothing = true\n")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert main(["gait-forms", "fit", str(sim_recs[0]), "-o", str(tmp_path / "forms.json"), "--config", str(cfg)]) == 0
+    forms, _ = load_forms(tmp_path / "forms.json")
+    assert forms.cycle_speed_check is False and forms.smoothing is True  # kept in the forms file
 
 
 def test_dynamic_similarity_makes_features_dimensionless():

@@ -98,9 +98,9 @@ def _cmd_gait_forms(args: argparse.Namespace) -> int:
     from pdr.pipelines import gait_forms
 
     if args.action == "fit":
-        print(gait_forms.fit_forms([Path(r) for r in args.recs], Path(args.output)))
+        print(gait_forms.fit_forms([Path(r) for r in args.recs], Path(args.output), config_path=args.config))
     else:
-        print(gait_forms.classify_forms(Path(args.rec), Path(args.forms), Path(args.output)))
+        print(gait_forms.classify_forms(Path(args.rec), Path(args.forms), Path(args.output), config_path=args.config))
     return 0
 
 
@@ -191,10 +191,12 @@ def build_parser() -> argparse.ArgumentParser:
     g = gsub.add_parser("fit")
     g.add_argument("recs", nargs="+")
     g.add_argument("-o", "--output", required=True)
+    g.add_argument("--config", default=None, help="TOML: [gait_forms], [steps], [step_length]")
     g = gsub.add_parser("classify")
     g.add_argument("rec")
     g.add_argument("--forms", required=True)
     g.add_argument("-o", "--output", required=True)
+    g.add_argument("--config", default=None, help="TOML: [steps], [step_length]")
     p.set_defaults(func=_cmd_gait_forms)
 
     p = sub.add_parser("gait-camera", help="walking state, form and body pose from a thigh camera (Watanabe et al.)")

@@ -39,7 +39,8 @@ MIN_STEPS_PER_MODEL = 30  # fewer matched steps than this do not fit a per-form 
 BODY_N_FORMS = 10
 FOOT_N_FORMS = 6
 TRUNK_PLACEMENTS = ("waist", "trunk")
-GAIT_FORMS_KEYS = {"forms", "forms_file", "n_forms", "smoothing"}
+GAIT_FORMS_KEYS = {"forms", "forms_file", "n_forms", "smoothing", "cycle_speed_check"}
+CLASSIFY_KEYS = ("smoothing", "cycle_speed_check")  # FourierGaitForms settings that [gait_forms] may set
 
 
 def _leg_length_m(rec: Recording) -> float:
@@ -111,20 +112,33 @@ def step_forms(steps: pd.DataFrame, labelled: pd.DataFrame) -> np.ndarray:
     return kinds
 
 
+def _checked(section: dict[str, Any]) -> dict[str, Any]:
+    """A ``[gait_forms]`` configuration section whose keys are all known."""
+    unknown = sorted(set(section) - GAIT_FORMS_KEYS)
+    if unknown:
+        raise InputError(f"configuration [gait_forms]: unknown key(s) {', '.join(unknown)}; expected some of: "
+                         f"{', '.join(sorted(GAIT_FORMS_KEYS))}")
+    return section
+
+
+def _classify_settings(forms: FourierGaitForms, section: dict[str, Any]) -> None:
+    """The forms file's classification settings, unless the configuration says otherwise."""
+    for key in CLASSIFY_KEYS:
+        if key in section:
+            setattr(forms, key, bool(section[key]))
+
+
 def fit_forms(recs: list[Path], out: Path, *, config_path=None, n_forms: int | None = None) -> Path:
     """Learn the walking forms of ``recs`` and write ``out`` (JSON, atomically); return ``out``.
 
-    Configuration: ``[gait_forms]`` ``n_forms`` (default 10 for body-worn IMUs, 6 for shoe IMUs), ``smoothing``;
+    Configuration: ``[gait_forms]`` ``n_forms`` (default 10 for body-worn IMUs, 6 for shoe IMUs), ``smoothing``,
+    ``cycle_speed_check`` (see :class:`FourierGaitForms`; kept in the forms file);
     ``[steps]``, ``[step_length]`` as for ``pdr steps``.
     """
     if not recs:
         raise InputError("gait-forms fit: expected at least one recording, found none")
     config = load_config(config_path)
-    section = dict(config.get("gait_forms") or {})
-    unknown = sorted(set(section) - GAIT_FORMS_KEYS)
-    if unknown:
-        raise InputError(f"configuration [gait_forms]: unknown key(s) {', '.join(unknown)}; expected some of: "
-                         f"{', '.join(sorted(GAIT_FORMS_KEYS))}")
+    section = _checked(dict(config.get("gait_forms") or {}))
     recordings = [load_recording(Path(r)) for r in recs]
     tables = [recording_cycles(r, config) for r in recordings]
     cycles = pd.concat([t for t in tables if len(t)] or tables[:1], ignore_index=True)
@@ -136,7 +150,7 @@ def fit_forms(recs: list[Path], out: Path, *, config_path=None, n_forms: int | N
                          "found both")
     is_foot = sources == {True}
     k = n_forms if n_forms is not None else section.get("n_forms", FOOT_N_FORMS if is_foot else BODY_N_FORMS)
-    forms = FourierGaitForms(n_forms=k, smoothing=bool(section.get("smoothing", False))).fit(cycles)
+    forms = FourierGaitForms(n_forms=k, **{key: bool(section[key]) for key in CLASSIFY_KEYS if key in section}).fit(cycles)
     info: dict[str, Any] = {"recordings": [r.id for r in recordings], "n_cycles": int(len(cycles))}
     models = fit_step_models(recordings, forms, config)
     if models:
@@ -188,6 +202,7 @@ def classify_forms(rec: Path, forms: Path, out: Path, *, config_path=None) -> Pa
     """Label the gait cycles of ``rec`` with the forms of ``forms`` and write ``out`` (CSV, atomically)."""
     config = load_config(config_path)
     model, _ = load_forms(forms)
+    _classify_settings(model, _checked(dict(config.get("gait_forms") or {})))
     recording = load_recording(Path(rec), with_reference=False)
     cycles = recording_cycles(recording, config)
     if len(cycles) == 0:
@@ -203,10 +218,7 @@ def per_form_step_lengths(rec: Recording, steps: pd.DataFrame, section: dict[str
     lengths (``step_length_m``, ``step_length_std_m``) of the steps in each form by that form's step model from the
     forms file (steps of a form without a model keep the configured model's). Returns the steps (with a ``form``
     column) and a summary for ``run.json``."""
-    unknown = sorted(set(section) - GAIT_FORMS_KEYS)
-    if unknown:
-        raise InputError(f"configuration [gait_forms]: unknown key(s) {', '.join(unknown)}; expected some of: "
-                         f"{', '.join(sorted(GAIT_FORMS_KEYS))}")
+    _checked(section)
     path = section.get("forms", section.get("forms_file"))
     if not isinstance(path, str):
         raise InputError(f"configuration [gait_forms]: expected forms = \"path/to/forms.json\", found {path!r}")
@@ -214,8 +226,7 @@ def per_form_step_lengths(rec: Recording, steps: pd.DataFrame, section: dict[str
     if not path.is_absolute() and base_dir is not None:
         path = base_dir / path
     forms, doc = load_forms(path)
-    if "smoothing" in section:
-        forms.smoothing = bool(section["smoothing"])
+    _classify_settings(forms, section)
     models = {k: model_from_dict(v, f"forms {path}: step model {k!r}") for k, v in (doc.get("step_models") or {}).items()
               if k != "all"}
     steps = steps.copy()
