@@ -18,7 +18,7 @@ import pandas as pd
 from scipy.cluster.vq import kmeans2
 
 from pdr.base import Algorithm
-from pdr.constants import GRAVITY_MPS2
+from pdr.constants import FLIGHT_MAX_SPECIFIC_FORCE_G, GRAVITY_MPS2
 from pdr.errors import InputError
 from pdr.gait.fourier import DEFAULT_ORDER
 from pdr.io.tomlio import read_json
@@ -34,9 +34,6 @@ DEFAULT_LEG_LENGTH_M = LEG_LENGTH_PER_HEIGHT * 1.75
 FROUDE_SLOW = 0.1
 FROUDE_FAST = 0.3
 FROUDE_RUN = 0.5
-# Running has a flight phase, in which the trunk falls freely (vertical acceleration -g). A 5th-order Fourier series
-# rounds the short flight plateau, so a cycle whose lowest vertical acceleration is below -0.8 g is running.
-FLIGHT_FRACTION_OF_G = 0.8
 # Stairs climb at about 30-35 degrees, ramps at most ~5 (1:12): a path steeper than 15 degrees is stairs.
 STAIRS_MIN_SLOPE = np.tan(np.radians(15.0))
 # A stride that turns more than 30 degrees is a turn (a corner walked in one or two strides turns 45-90 per stride).
@@ -100,8 +97,9 @@ def form_kind(speed_mps: float, turn_rad_per_cycle: float, climb_rate_mps: float
               min_acc_v_mps2: float = float("nan")) -> str:
     """The name of a form from its speed, turn per cycle, climb rate and lowest vertical acceleration (see the
     constants). Running is told by its flight phase where the trunk's vertical acceleration is known (it falls
-    freely, near -g, in flight; a walking trunk vaults over the stance leg and stays well above that), else by the
-    Froude number; the walking speeds by the Froude number."""
+    freely, near -g, in flight: specific force at most ``pdr.constants.FLIGHT_MAX_SPECIFIC_FORCE_G``; a walking
+    trunk vaults over the stance leg and stays well above that), else by the Froude number; the walking speeds by
+    the Froude number."""
     if np.isfinite(climb_rate_mps) and np.isfinite(speed_mps) and speed_mps > 0:
         slope = climb_rate_mps / speed_mps
         if slope > STAIRS_MIN_SLOPE:
@@ -111,7 +109,7 @@ def form_kind(speed_mps: float, turn_rad_per_cycle: float, climb_rate_mps: float
     if np.isfinite(turn_rad_per_cycle) and abs(turn_rad_per_cycle) > TURN_MIN_RAD_PER_CYCLE:
         return "turning"
     if np.isfinite(min_acc_v_mps2):
-        if min_acc_v_mps2 < -FLIGHT_FRACTION_OF_G * GRAVITY_MPS2:
+        if min_acc_v_mps2 + GRAVITY_MPS2 <= FLIGHT_MAX_SPECIFIC_FORCE_G * GRAVITY_MPS2:  # a flight phase
             return "run"
         if not np.isfinite(speed_mps):
             return "walk"

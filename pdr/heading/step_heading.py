@@ -10,19 +10,14 @@ from scipy import signal
 from scipy.ndimage import minimum_filter1d
 
 from pdr.base import Algorithm
-from pdr.constants import GRAVITY_MPS2
+from pdr.constants import FLIGHT_MAX_SPECIFIC_FORCE_G, GRAVITY_MPS2, WALK_MIN_SPECIFIC_FORCE_G
 from pdr.errors import InputError
 from pdr.signals.attitude import Attitude, earth_acceleration, rotate, yaw_increments
 from pdr.signals.resample import UniformImu
 
-# Gait of each stretch from the vertical specific force (in g) over one step. Walking is an inverted pendulum: the
-# trunk vaults over the stance leg and its vertical specific force bottoms out at g (1 - v^2 / (g L)), about 0.5 g at
-# the walk-run transition (Froude number 0.5), a little less at the pelvis (its own excursion); a foot is always on
-# the ground. Running is a bouncing spring-mass gait with a flight phase, where the body is in free fall and the
-# specific force is near 0 g (soft tissue and the low-pass leave a trough of 0.1-0.3 g). Between the two bounds the
-# sign of the phase relation fades linearly, so an ambiguous stretch gives a weak, not a wrong, vote.
-FLIGHT_MAX_SPECIFIC_FORCE_G = 0.25
-WALK_MIN_SPECIFIC_FORCE_G = 0.40
+# Gait of each stretch from the vertical specific force over one step (pdr.constants: a flight phase at or below
+# FLIGHT_MAX_SPECIFIC_FORCE_G, walking at or above WALK_MIN_SPECIFIC_FORCE_G). Between the two bounds the sign of
+# the phase relation fades linearly, so an ambiguous stretch gives a weak, not a wrong, vote.
 VERTICAL_LOWPASS_HZ = 10.0  # keeps the flight trough (~0.1 s), drops the heel-strike ringing
 
 HEADING_COLUMNS = ["heading_rad", "heading_change_rad", "heading_change_std_rad", "mag_heading_rad", "mag_heading_std_rad"]
