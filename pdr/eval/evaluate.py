@@ -9,7 +9,6 @@ error by construction and is left out of the landmark statistics.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any
 
@@ -28,6 +27,7 @@ from pdr.eval.metrics import (
     rotate_about,
 )
 from pdr.io.recording import check_time, load_recording, read_csv
+from pdr.io.tomlio import read_json
 
 STEP_F1_TOLERANCE_S = 0.25
 SIGNIFICANT_DIGITS = 7  # metrics are printed to 7 significant digits (far beyond their accuracy)
@@ -46,13 +46,10 @@ def _read_out_table(out: Path, name: str, columns: tuple[str, ...]) -> pd.DataFr
 
 
 def _read_summary(out: Path) -> dict[str, Any]:
-    path = out / "summary.json"
-    if not path.is_file():
-        raise InputError(f"{out}: expected a pdr run output folder with summary.json, found none")
-    try:
-        return json.loads(path.read_text(encoding="utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise InputError(f"{path}: expected a JSON object, found unreadable content ({exc})") from None
+    summary = read_json(out / "summary.json", what=str(out), missing="expected a pdr run output folder with summary.json, found none")
+    if not isinstance(summary, dict):
+        raise InputError(f"{out}/summary.json: expected a JSON object, found {type(summary).__name__}")
+    return summary
 
 
 def _step_metrics(est_steps: pd.DataFrame, ref: dict[str, Any], tolerance_s: float) -> dict[str, Any]:

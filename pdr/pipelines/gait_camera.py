@@ -138,7 +138,7 @@ def fit_templates(mocap_paths: list[Path], out: Path) -> Path:
 
 
 def load_templates(path: Path) -> FourierFormTemplates:
-    doc = read_json(path, what=str(path), missing="a templates file (pdr gait-camera fit)")
+    doc = read_json(path, what=str(path), missing="expected a templates file (pdr gait-camera fit), found none")
     if not isinstance(doc, dict) or doc.get("format") != TEMPLATES_FORMAT:
         found = doc.get("format") if isinstance(doc, dict) else type(doc).__name__
         raise InputError(f"{path}: expected a {TEMPLATES_FORMAT} file (pdr gait-camera fit), found {found!r}")
