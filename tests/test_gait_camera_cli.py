@@ -86,12 +86,20 @@ def test_bad_input_gets_one_line_and_nothing_written(made, tmp_path, capsys):
     shutil.copytree(d / "walk", broken)
     (broken / "camera.toml").unlink()
     _fails(capsys, ["gait-camera", "estimate", str(broken), "--templates", tpl, "-o", str(tmp_path / "o2")], "camera.toml")
+    text = (d / "walk" / "camera.toml").read_text()
+    (broken / "camera.toml").write_text(text.replace("fps = 100.0", 'fps = "fast"'))
+    _fails(capsys, ["gait-camera", "estimate", str(broken), "--templates", tpl, "-o", str(tmp_path / "o2")], "numbers for fps")
     shutil.copy(d / "walk" / "camera.toml", broken / "camera.toml")
     obs = pd.read_csv(broken / "observations.csv")
     obs.loc[3, "point_id"] = 10**9
     obs.to_csv(broken / "observations.csv", index=False)
     _fails(capsys, ["gait-camera", "estimate", str(broken), "--templates", tpl, "-o", str(tmp_path / "o2")], "unknown")
     obs.loc[3, "point_id"] = obs.loc[2, "point_id"]
+    obs["frame"] = obs["frame"].astype(float)
+    obs.loc[4, "frame"] += 0.5
+    obs.to_csv(broken / "observations.csv", index=False)
+    _fails(capsys, ["gait-camera", "estimate", str(broken), "--templates", tpl, "-o", str(tmp_path / "o2")], "whole frame")
+    obs.loc[4, "frame"] -= 0.5
     obs.loc[5, "u_px"] = float("nan")
     obs.to_csv(broken / "observations.csv", index=False)
     _fails(capsys, ["gait-camera", "estimate", str(broken), "--templates", tpl, "-o", str(tmp_path / "o2")], "NaN")

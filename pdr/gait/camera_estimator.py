@@ -707,6 +707,9 @@ class WearableCameraGaitEstimation:
         tp = self.templates
         obs = observations.sort_values("frame", kind="stable")
         fr = obs["frame"].to_numpy()
+        if len(fr) and not (np.issubdtype(fr.dtype, np.integer) or np.all(np.mod(fr, 1) == 0)):
+            raise InputError("thigh camera observations: expected whole frame indices, found fractions or missing values")
+        fr = fr.astype(int)
         if len(fr) and (fr.min() < 0 or fr.max() >= len(t)):
             raise InputError(f"thigh camera observations: expected frame indices 0..{len(t) - 1}, found {fr.min()}..{fr.max()}")
         pid = points["point_id"].to_numpy()

@@ -64,11 +64,11 @@ def read_thigh_camera(folder: Path) -> tuple[ThighCameraModel, dict[str, float],
     doc = read_toml(folder / "camera.toml", what=what)
     cam = _section(doc, "camera", CAMERA_KEYS, what, required=True) | _section(doc, "mount", MOUNT_KEYS, what, required=False)
     start = _section(doc, "start", START_KEYS, what, required=True)
-    try:
-        camera = ThighCameraModel(**cam)
-        start = {k: float(v) for k, v in start.items()}
-    except (TypeError, ValueError) as exc:
-        raise InputError(f"{what}: expected numbers for the camera and the start pose, found otherwise ({exc})") from None
+    bad = [k for k, v in (cam | start).items() if k != "side" and (isinstance(v, bool) or not isinstance(v, (int, float)))]
+    if bad:
+        raise InputError(f"{what}: expected numbers for {', '.join(bad)}, found {', '.join(repr((cam | start)[k]) for k in bad)}")
+    camera = ThighCameraModel(**cam)
+    start = {k: float(v) for k, v in start.items()}
     frames = read_csv(folder / "frames.csv", f"{folder}/frames.csv")
     observations = read_csv(folder / "observations.csv", f"{folder}/observations.csv")
     points = read_csv(folder / "points.csv", f"{folder}/points.csv")
