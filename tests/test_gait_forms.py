@@ -14,7 +14,7 @@ from pdr.cli.main import main
 from pdr.errors import InputError
 from pdr.gait import amplitude_phase, fourier_coefficients, fourier_derivative, fourier_series, from_amplitude_phase
 from pdr.gait.cycles import MAX_CYCLE_S, foot_cycles, foot_layout, imu_cycles, imu_layout, side_convention
-from pdr.gait.forms import PENDULUM_K, FourierGaitForms, load_forms, pendulum_speed_mps, speed_kind
+from pdr.gait.forms import PENDULUM_K, TURN_MIN_RAD_PER_CYCLE, FourierGaitForms, load_forms, pendulum_speed_mps, speed_kind
 from pdr.io.recording import load_recording, save_recording
 from pdr.pipelines.gait_forms import classify_forms, recording_cycles
 from pdr.sim.simulator import simulate
@@ -177,7 +177,8 @@ def test_each_walking_cycle_is_named_by_its_own_froude_number(sim_recs):
         train, test = (recording_cycles(load_recording(p), {}) for p in sim_recs)
     forms = FourierGaitForms().fit(train)
     got = forms.classify(test).cycles_forms_
-    walking = np.isin(forms.forms_["kind"].to_numpy(object)[got["form_id"]], ["slow_walk", "walk", "fast_walk"])
+    own_turn = np.abs(test["turn_rate_radps"] * test["duration_s"]).to_numpy() > TURN_MIN_RAD_PER_CYCLE
+    walking = np.isin(forms.forms_["kind"].to_numpy(object)[got["form_id"]], ["slow_walk", "walk", "fast_walk"]) & ~own_turn
     own = speed_kind(pendulum_speed_mps(test, test["leg_length_m"]), test["leg_length_m"].to_numpy())
     assert walking.sum() > 50
     assert np.array_equal(got["kind"][walking], np.where(own == "run", "fast_walk", own)[walking])
@@ -199,6 +200,16 @@ def test_each_walking_cycle_is_named_by_its_own_froude_number(sim_recs):
     assert test["trunk_sensor"].all()
     hand = forms.classify(test.assign(trunk_sensor=False)).cycles_forms_["kind"].to_numpy()
     np.testing.assert_array_equal(hand, base)
+    # a cycle that itself turns more than 30 degrees is turning, whatever its form; more true turns are found so
+    assert own_turn.sum() >= 5 and (got["kind"].to_numpy()[own_turn] == "turning").all()
+    no_turn = FourierGaitForms.from_dict({**forms.to_dict(), "params": {**forms.get_params(), "cycle_turn_check": False}})
+    formwise = no_turn.classify(test).cycles_forms_["kind"].to_numpy()
+    np.testing.assert_array_equal(formwise[~own_turn], got["kind"].to_numpy()[~own_turn])
+    tr = rec.reference["trajectory"]
+    h = np.unwrap(tr["heading_rad"].to_numpy())
+    turns = np.abs(np.interp(test["t_end_s"], tr["t_s"], h) - np.interp(test["t_start_s"], tr["t_s"], h)) > TURN_MIN_RAD_PER_CYCLE
+    assert turns.sum() >= 5
+    assert (got["kind"].to_numpy()[turns] == "turning").mean() >= (formwise[turns] == "turning").mean()
 
 
 def test_cli_round_trip_and_forms_file_errors(sim_recs, tmp_path, capsys):

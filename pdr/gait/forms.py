@@ -223,6 +223,10 @@ class FourierGaitForms(Algorithm):
         0.944 to 0.961 on average, the worst person from 0.816 to 0.951). Running, turns and stairs keep their form's
         name (renaming cycles by their own flight phase too lowered the accuracy, 0.949). The pendulum is the
         trunk's: for an IMU in a pocket or a hand, turn the check off.
+    cycle_turn_check : a cycle that itself turns more than ``TURN_MIN_RAD_PER_CYCLE`` (its ``turn_rate_radps`` x
+        ``duration_s``, from the gyro) is named turning whatever its form, stairs excepted (default True). k-means
+        places a corner stride by the shape of its signals, which a turn changes little: on the simulated benchmark
+        the turning cycles found rose from 0.849 to 0.930 and the accuracy per cycle from 0.962 to 0.965.
 
     Attributes
     ----------
@@ -237,7 +241,7 @@ class FourierGaitForms(Algorithm):
     labels_ : form id of each training cycle (after :meth:`fit`) or of each classified cycle (after :meth:`classify`).
     cycles_forms_ : after :meth:`classify`: ``t_start_s, t_end_s, form, form_id, kind, distance, source``
         (``distance``: to the nearest centroid in the standardised PCA space; ``kind``: the form's, or the cycle's own
-        speed name with ``cycle_speed_check``).
+        speed name with ``cycle_speed_check``, or turning with ``cycle_turn_check``).
 
     Notes
     -----
@@ -256,7 +260,7 @@ class FourierGaitForms(Algorithm):
 
     def __init__(self, *, n_forms: int = 10, n_components: int = 3, seed: int = 0, n_init: int = 10,
                  smoothing: bool = False, leg_length_m: float | None = None, dynamic_similarity: bool = False,
-                 cycle_speed_check: bool = True) -> None:
+                 cycle_speed_check: bool = True, cycle_turn_check: bool = True) -> None:
         self.n_forms = n_forms
         self.n_components = n_components
         self.seed = seed
@@ -265,6 +269,7 @@ class FourierGaitForms(Algorithm):
         self.leg_length_m = leg_length_m
         self.dynamic_similarity = dynamic_similarity
         self.cycle_speed_check = cycle_speed_check
+        self.cycle_turn_check = cycle_turn_check
 
     # ------------------------------------------------------------------ helpers
     def _check_params(self) -> None:
@@ -449,6 +454,10 @@ class FourierGaitForms(Algorithm):
         kinds = self.forms_["kind"].to_numpy(object)[labels]
         if self.cycle_speed_check:
             kinds = self._cycle_speed_kinds(cycles, kinds)
+        if self.cycle_turn_check and "turn_rate_radps" in cycles.columns:
+            turn = np.abs(cycles["turn_rate_radps"].to_numpy(float) * cycles["duration_s"].to_numpy(float))
+            own_turn = np.isfinite(turn) & (turn > TURN_MIN_RAD_PER_CYCLE) & ~np.isin(kinds, ["stairs_up", "stairs_down"])
+            kinds = np.where(own_turn, "turning", kinds)
         self.cycles_forms_ = pd.DataFrame({
             "t_start_s": cycles["t_start_s"].to_numpy(float), "t_end_s": cycles["t_end_s"].to_numpy(float),
             "form": names[labels], "form_id": labels.astype(int), "kind": kinds, "distance": self.distance_,

@@ -39,8 +39,8 @@ MIN_STEPS_PER_MODEL = 30  # fewer matched steps than this do not fit a per-form 
 BODY_N_FORMS = 10
 FOOT_N_FORMS = 6
 TRUNK_PLACEMENTS = ("waist", "trunk")
-GAIT_FORMS_KEYS = {"forms", "forms_file", "n_forms", "smoothing", "cycle_speed_check"}
-CLASSIFY_KEYS = ("smoothing", "cycle_speed_check")  # FourierGaitForms settings that [gait_forms] may set
+GAIT_FORMS_KEYS = {"forms", "forms_file", "n_forms", "smoothing", "cycle_speed_check", "cycle_turn_check"}
+CLASSIFY_KEYS = ("smoothing", "cycle_speed_check", "cycle_turn_check")  # FourierGaitForms settings that [gait_forms] may set
 
 
 def _leg_length_m(rec: Recording) -> float:
@@ -132,7 +132,7 @@ def fit_forms(recs: list[Path], out: Path, *, config_path=None, n_forms: int | N
     """Learn the walking forms of ``recs`` and write ``out`` (JSON, atomically); return ``out``.
 
     Configuration: ``[gait_forms]`` ``n_forms`` (default 10 for body-worn IMUs, 6 for shoe IMUs), ``smoothing``,
-    ``cycle_speed_check`` (see :class:`FourierGaitForms`; kept in the forms file);
+    ``cycle_speed_check``, ``cycle_turn_check`` (see :class:`FourierGaitForms`; kept in the forms file);
     ``[steps]``, ``[step_length]`` as for ``pdr steps``.
     """
     if not recs:
