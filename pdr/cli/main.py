@@ -196,7 +196,7 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("rec")
     g.add_argument("--forms", required=True)
     g.add_argument("-o", "--output", required=True)
-    g.add_argument("--config", default=None, help="TOML: [steps], [step_length]")
+    g.add_argument("--config", default=None, help="TOML: [gait_forms], [steps], [step_length]")
     p.set_defaults(func=_cmd_gait_forms)
 
     p = sub.add_parser("gait-camera", help="walking state, form and body pose from a thigh camera (Watanabe et al.)")

@@ -299,7 +299,8 @@ class FourierFormTemplates:
     # JSON round trip: a fitted template set is the estimator's per-user model
     def to_dict(self) -> dict[str, Any]:
         return {"order": self.order, "forms": self.forms_, "params": list(PARAMS),
-                "coefficients": self.coefficients_.tolist(), "phase_rate_radps": self.phase_rate_radps_.tolist(), "speed_mps": self.speed_mps_.tolist(),
+                "coefficients": self.coefficients_.tolist(), "phase_rate_radps": self.phase_rate_radps_.tolist(),
+                "speed_mps": self.speed_mps_.tolist(),
                 "transitions": self.transitions_.astype(int).tolist(), "thigh_m": self.thigh_m_, "shank_m": self.shank_m_}
 
     @classmethod
@@ -788,7 +789,7 @@ class WearableCameraGaitEstimation:
             logw = logw - logw.max()
             best = int(np.argmax(logw))
             if enough:
-                out_n[i], out_in[i], out_err[i] = self._fit(state[best], form[best], pts, uv)
+                out_n[i], out_in[i], out_err[i] = self._fit_stats(state[best], form[best], pts, uv)
                 lost = lost + 1 if not out_err[i] <= self.lost_error_sigmas * self.likelihood_sigma_px else 0
                 if lost >= self.lost_frames:  # track lost: search phase and form again around the pose
                     b = state[best]
@@ -810,7 +811,7 @@ class WearableCameraGaitEstimation:
                     out_state[i], out_form[i] = form_state[i, f], f
                     pts, uv = frame_points(i)
                     if len(pts) >= MIN_POINTS:
-                        out_n[i], out_in[i], out_err[i] = self._fit(out_state[i], f, pts, uv)
+                        out_n[i], out_in[i], out_err[i] = self._fit_stats(out_state[i], f, pts, uv)
         self.time_s_ = time.perf_counter() - t0
         self.n_predicted_only_ = n_pred_only
         self.n_relocalised_ = n_relocalised
@@ -831,7 +832,7 @@ class WearableCameraGaitEstimation:
         self.cycles_ = cycles_from_phase(t, out_state[:, 3], self.states_["form"].to_numpy())
         return self
 
-    def _fit(self, state, form, pts, uv):
+    def _fit_stats(self, state, form, pts, uv):
         """Points, inliers and mean inlier re-projection error (px) of one state in one form."""
         h, depth = project_points(state[None], np.array([form]), pts, self.templates, self.camera)
         e = np.where(depth[0] > 0, np.hypot(*(uv - h[0]).T), np.inf)
@@ -891,7 +892,8 @@ def most_likely_forms(form_score: np.ndarray, allowed: np.ndarray, log_stay: flo
     for i in range(last - 1, -1, -1):
         if not started[i]:
             break
-        out[i] = int(np.argmax(form_score[i] + log_t[:, out[i + 1]]))
+        into = form_score[i] + log_t[:, out[i + 1]]
+        out[i] = int(np.argmax(into if np.isfinite(into).any() else form_score[i]))  # a re-search may jump forms
     return out
 
 
