@@ -122,6 +122,34 @@ def _gaitmap_cycles(tmp: Path) -> pd.DataFrame:
     return pd.concat(tables, ignore_index=True)
 
 
+# GNSS for the first part of the walk only (the rest indoors): what the GNSS-calibrated step lengths carry into the
+# outage. Fix noise as the walk_30min_gps scenario.
+GNSS_OUTAGE = {"enabled": True, "noise_m": 1.5, "markov_sigma_m": 2.5, "markov_tau_s": 120.0, "outlier_fraction": 0.0,
+               "outages_s": [[175.0, 400.0]]}
+
+
+def _gnss_outage_errors(seeds, forms_path: Path, tmp: Path) -> dict[str, list[tuple[float, float]]]:
+    """Final position error (m) and distance error (%) of ``pdr run`` on the mixed walks with GNSS for the first
+    175 s: with the per-form step models (GNSS calibrates one scale of them) and with the configured regression
+    (GNSS calibrates its A, B, C)."""
+    from pdr.eval import evaluate_run
+    from pdr.pipelines.run import run_recording
+
+    raw = read_toml(SCENARIO, what="scenario") | {"gnss": GNSS_OUTAGE}
+    config = tmp / "forms_run.toml"
+    config.write_text(f'[gait_forms]\nforms = "{forms_path}"\n')
+    out = {"per-form": [], "one regression": []}
+    for s in seeds:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            rec = save_recording(simulate(raw, s, default_id=SCENARIO.stem), tmp / f"gnss_{s}")
+            for name, cfg in (("per-form", config), ("one regression", None)):
+                run_recording(rec, tmp / f"run_{name}_{s}", config_path=cfg)
+                m = evaluate_run(tmp / f"run_{name}_{s}", rec)
+                out[name].append((m["final_error_m"], m["distance_error_pct"]))
+    return out
+
+
 def _three_way(kind: np.ndarray) -> np.ndarray:
     return np.where(np.isin(kind, ["stairs_up", "stairs_down"]), kind, "level")
 
@@ -176,6 +204,18 @@ def run(quick: bool = False) -> list[dict]:
                      "population": "population step model (uncalibrated)"}[name]
             row(case, f"distance error, {label}: mean |error|", round(float(np.mean(np.abs(e))), 2), "%",
                 "< single model" if name == "per-form" else "")
+
+        if not quick:
+            gnss = _gnss_outage_errors(test_seeds, forms_path, tmp)
+            case_gnss = f"simulated mixed walks, GNSS for the first 175 s then indoors, test seeds {list(test_seeds)}"
+            for name, errs in gnss.items():
+                e = np.array(errs)
+                how = ("per-form step models, GNSS calibrates one scale of them" if name == "per-form"
+                       else "one regression, GNSS calibrates its A, B, C")
+                row(case_gnss, f"final position error, {how}: mean", round(float(e[:, 0].mean()), 2), "m",
+                    "< one regression" if name == "per-form" else "")
+                row(case_gnss, f"distance error, {how}: mean |error|", round(float(np.abs(e[:, 1]).mean()), 2), "%",
+                    "< one regression" if name == "per-form" else "")
 
         # speed: an hour of cycles (the test cycles tiled)
         n_hour = int(np.ceil(3600.0 / float(cyc["duration_s"].mean())))

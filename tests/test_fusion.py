@@ -115,6 +115,21 @@ def test_step_model_is_calibrated_towards_the_truth(walk, graph_result):
     assert abs(graph_result.step_length_m_.sum() - true_total) / true_total < 0.015
 
 
+def test_step_scale_keeps_the_given_lengths_and_calibrates_their_level(walk):
+    # per-form step lengths that are 8% short for this walker: GNSS calibrates one scale of them, the relative lengths
+    # stay; without GNSS (or with the regression calibrated) the scale stays 1
+    steps = walk["steps"].assign(step_length_m=0.92 * walk["true_length_m"])
+    fusion = FactorGraphFusion(calibrate_step_model=False, calibrate_step_scale=True)
+    fusion.fuse(steps, gnss=walk["gnss"])
+    scale = fusion.step_scale_
+    assert scale["calibrated"] and scale["scale"] == pytest.approx(1 / 0.92, abs=0.015) and scale["std"] < 0.01
+    true_total = walk["true_length_m"].sum()
+    assert abs(fusion.step_length_m_.sum() - true_total) / true_total < 0.015
+    assert FactorGraphFusion(calibrate_step_model=False, calibrate_step_scale=True).fuse(steps).step_scale_ == {
+        "scale": 1.0, "std": 0.1, "prior_std": 0.1, "calibrated": False}
+    assert not FactorGraphFusion(calibrate_step_scale=True).fuse(steps, gnss=walk["gnss"]).step_scale_["calibrated"]
+
+
 def test_gnss_outliers_are_rejected_and_do_not_pull_the_path():
     clean = synthetic_walk(duration_s=300.0, seed=5)
     dirty = synthetic_walk(duration_s=300.0, seed=5, outlier_fraction=0.1)

@@ -173,6 +173,11 @@ class FactorGraphFusion(Algorithm):
         columns ``step_freq_hz``, ``acc_var_m2ps4`` and at least two used fixes or stride factors).
     prior_a_std_m, prior_b_std_m_per_hz, prior_c_std_m_per_m2ps4
         Prior standard deviations of ``(A, B, C)`` where the step model carries no ``covariance``.
+    calibrate_step_scale, step_scale_prior_std
+        When the regression is not calibrated (``calibrate_step_model`` False, or another step model), estimate one
+        multiplicative scale of the steps' own lengths, prior 1 +- ``step_scale_prior_std``, under the same
+        conditions (``pdr run`` with per-form step models: their relative lengths are kept, GNSS sets the user's
+        level). Reported as ``step_scale_``.
     calibrate_stride_scales
         Estimate a multiplicative length scale ``s`` per stride source (the records' ``source``: ``leg_camera``,
         ``foot_imu``, ...), prior 1, from GNSS (at least two fixes); without GNSS every scale stays 1.
@@ -215,6 +220,9 @@ class FactorGraphFusion(Algorithm):
         The estimated heading-rate bias and magnetometer deviation at each step.
     mag_deviation_coef_ : ndarray
         The deviation curve's coefficients (``[1, cos h, sin h, cos 2h, sin 2h]``), for an :class:`IncrementalFusion`.
+    step_scale_ : dict
+        ``scale`` (multiplies the steps' lengths; 1 unless ``calibrate_step_scale`` applies), ``std`` (conditional on
+        the poses), ``prior_std``, ``calibrated``.
     stride_scales_ : dict
         Per stride source: ``scale`` (multiplies its lengths), ``std`` (marginal over the poses and the step model,
         conditional on the heading parameters; the prior std when not calibrated), ``prior_std``, ``n_strides``,
@@ -255,7 +263,8 @@ class FactorGraphFusion(Algorithm):
                  lateral_std_m: float = 0.02, default_h_acc_m: float = 5.0, gnss_time_tolerance_s: float = 1.0,
                  gnss_factor: str = "shifted", huber_k: float = 1.345, gnss_gate_chi2: float = CHI2_2DOF_999,
                  calibrate_step_model: bool = True, prior_a_std_m: float = 0.2, prior_b_std_m_per_hz: float = 0.1,
-                 prior_c_std_m_per_m2ps4: float = 0.02, calibrate_stride_scales: bool = True,
+                 prior_c_std_m_per_m2ps4: float = 0.02, calibrate_step_scale: bool = False,
+                 step_scale_prior_std: float = 0.1, calibrate_stride_scales: bool = True,
                  stride_scale_prior_std: float = 0.07, stride_scale_prior_std_by_source: dict[str, float] | None = None,
                  gnss_correlated_std_m: float = 3.0, gnss_correlation_s: float = 120.0,
                  gyro_bias_knot_s: float = 60.0,
@@ -275,6 +284,8 @@ class FactorGraphFusion(Algorithm):
         self.prior_a_std_m = prior_a_std_m
         self.prior_b_std_m_per_hz = prior_b_std_m_per_hz
         self.prior_c_std_m_per_m2ps4 = prior_c_std_m_per_m2ps4
+        self.calibrate_step_scale = calibrate_step_scale
+        self.step_scale_prior_std = step_scale_prior_std
         self.calibrate_stride_scales = calibrate_stride_scales
         self.stride_scale_prior_std = stride_scale_prior_std
         self.stride_scale_prior_std_by_source = stride_scale_prior_std_by_source
@@ -300,6 +311,7 @@ class FactorGraphFusion(Algorithm):
                     "gyro_bias_prior_std_radps", "mag_deviation_prior_std_rad", "alternation_tol_m", "prior_a_std_m",
                     "prior_b_std_m_per_hz",
                     "prior_c_std_m_per_m2ps4", "max_step_duration_s", "gap_speed_std_mps", "stride_scale_prior_std",
+                    "step_scale_prior_std",
                     "gnss_correlated_std_m", "gnss_correlation_s"]
         for name in positive:
             value = getattr(self, name)
@@ -342,6 +354,8 @@ class FactorGraphFusion(Algorithm):
         self.mag_deviation_rad_ = np.zeros(0)
         self.mag_deviation_coef_ = np.zeros(deviation_design(np.zeros(1)).shape[1])
         self.stride_scales_ = {}
+        self.step_scale_ = {"scale": 1.0, "std": self.step_scale_prior_std, "prior_std": self.step_scale_prior_std,
+                            "calibrated": False}
         self.solver_ = {"method": "levenberg_marquardt", "iterations": 0, "alternations": 0, "final_error": 0.0,
                         "time_s": 0.0, "marginals_time_s": 0.0, "gnss_used": 0, "gnss_rejected": 0, "converged": True}
         return self
@@ -365,6 +379,8 @@ class FactorGraphFusion(Algorithm):
         regression = step_model is None or isinstance(step_model, RegressionStepLength)
         calibrate = bool(self.calibrate_step_model and regression and observable and problem.features is not None
                          and feats_ok.sum() >= 3)
+        # the steps' own lengths (e.g. per-form models) times one scale, when the regression is not calibrated
+        scale_steps = bool(self.calibrate_step_scale and not calibrate and observable)
         model_prior = None
         if calibrate:
             if step_model is None:
@@ -382,29 +398,32 @@ class FactorGraphFusion(Algorithm):
         nb = len(bias.values)
         i_bias, i_dev = slice(3, 3 + nb), slice(3 + nb, 3 + nb + n_dev)
         i_scale = slice(3 + nb + n_dev, 3 + nb + n_dev + n_src)
+        i_step_scale = 3 + nb + n_dev + n_src
         dt = problem.step_duration_s
         known_turn = problem.dtheta_std_rad < BOUT_START_HEADING_STD_RAD
         known_turn[0] = False
         t_step = problem.epoch_t_s[1:]
         model_cov = None
         theta0 = model_prior.theta if calibrate else np.zeros(3)
-        params = np.concatenate([theta0, bias.values, np.zeros(n_dev), np.ones(n_src)])
+        params = np.concatenate([theta0, bias.values, np.zeros(n_dev), np.ones(n_src), np.ones(1)])
         # each parameter in metres of effect on the path (convergence test and acceleration)
         mean_length = float(np.mean(problem.step_length_m)) if n else 1.0
         mean_speed = mean_length / float(np.median(dt)) if n else 1.0
         feat_scale = np.abs(np.nanmean(problem.features[feats_ok], axis=0)) if calibrate else np.ones(3)
         mean_stride = np.bincount(src, problem.stride_length_m, n_src) / np.maximum(np.bincount(src, minlength=n_src), 1)
         scale = np.concatenate([feat_scale, np.full(nb, 0.5 * self.gyro_bias_knot_s ** 2 * mean_speed),
-                                np.full(n_dev, 10.0 * mean_length), mean_stride])
+                                np.full(n_dev, 10.0 * mean_length), mean_stride, [mean_length]])
+        step_scale_std = self.step_scale_prior_std
 
         def unpack(p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
             b = SmoothSeries(bias.t0_s, bias.knot_s, p[i_bias])
             length = (np.where(feats_ok, np.nan_to_num(problem.features) @ p[:3], problem.step_length_m)
-                      if calibrate else problem.step_length_m)
+                      if calibrate else problem.step_length_m * p[i_step_scale])
             return length, problem.dtheta_rad - b(t_step) * dt, p[i_dev], problem.stride_length_m * p[i_scale][src]
 
         def update(poses: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
             """The closed-form parameter solve given the poses (each block kept where it is not observable)."""
+            nonlocal step_scale_std
             out, cov = p.copy(), None
             if estimate_bias:
                 resid = wrap_rad(np.diff(poses[:, 2]) - problem.dtheta_rad)
@@ -425,6 +444,13 @@ class FactorGraphFusion(Algorithm):
                 along = self._along_track(poses)
                 out[:3], cov = solve_step_model(along[feats_ok], problem.features[feats_ok],
                                                 problem.step_length_std_m[feats_ok], model_prior)
+            if scale_steps:  # MAP of k in along = k x length + e, prior k ~ N(1, step_scale_prior_std^2)
+                ok = ~problem.gap
+                w = 1.0 / np.square(problem.step_length_std_m[ok])
+                length_ok, info0 = problem.step_length_m[ok], 1.0 / self.step_scale_prior_std ** 2
+                info = float(np.sum(w * length_ok ** 2)) + info0
+                out[i_step_scale] = (float(np.sum(w * length_ok * self._along_track(poses)[ok])) + info0) / info
+                step_scale_std = info ** -0.5
             if estimate_scales:
                 joint = self._joint_step(problem, poses, values, p, unpack, use, absolute, calibrate, feats_ok,
                                          model_prior, src, scale_prior_std, i_scale)
@@ -502,6 +528,8 @@ class FactorGraphFusion(Algorithm):
         self.gnss_used_[problem.gnss_row] = use
         self.gyro_bias_radps_ = bias(problem.epoch_t_s[1:])
         self.mag_deviation_coef_ = params[i_dev].copy()
+        self.step_scale_ = {"scale": float(params[i_step_scale]), "std": step_scale_std,
+                            "prior_std": self.step_scale_prior_std, "calibrated": scale_steps}
         self.stride_scales_ = {
             str(name): {"scale": float(params[i_scale][q]) if estimate_scales else 1.0,
                         "std": float(scale_std[q]), "prior_std": float(scale_prior_std[q]),

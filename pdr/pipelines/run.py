@@ -189,6 +189,9 @@ def run_recording(rec: Path, out: Path, *, config_path=None, model_path=None, us
         if config.get("gait_forms") is not None and len(steps):  # per-form step models (issue 7)
             steps, gait_forms_info = per_form_step_lengths(
                 recording, steps, config["gait_forms"], config, Path(config_path).parent if config_path else None)
+            if gait_forms_info["steps_per_form_model"] and hasattr(fusion, "calibrate_step_scale"):
+                # keep the forms' relative step lengths: GNSS calibrates one scale of them, not one regression
+                fusion.calibrate_step_model, fusion.calibrate_step_scale = False, True
         lap("step_length_s")
 
         stride_tables = [t for t in (foot_strides(recording, config), camera_strides(recording, config)) if t is not None]
@@ -244,6 +247,9 @@ def run_recording(rec: Path, out: Path, *, config_path=None, model_path=None, us
         "gnss": gnss_counts or {"fixes": 0, "valid": 0, "masked": 0, "jumped": 0, "used": 0},
         "warnings": warning_list,
     }
+    step_scale = getattr(fusion, "step_scale_", None)
+    if step_scale and step_scale["calibrated"]:
+        summary["step_scale"] = step_scale  # steps.csv holds the fused lengths; the per-form models' x scale
     if stride_scales:
         summary["stride_scales"] = stride_scales  # strides.csv keeps the sources' lengths; the fusion used them x scale
     if gait_forms_info is not None:
