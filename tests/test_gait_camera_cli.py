@@ -119,3 +119,16 @@ def test_bad_input_gets_one_line_and_nothing_written(made, tmp_path, capsys):
     mocap.to_csv(tmp_path / "mocap.csv", index=False)
     _fails(capsys, ["gait-camera", "fit", str(tmp_path / "mocap.csv"), "-o", str(tmp_path / "t.json")], "form")
     assert not (tmp_path / "t.json").exists()
+
+
+def test_a_folder_without_corners_in_view_gives_a_warning_and_empty_results(made, tmp_path):
+    blind = tmp_path / "blind"
+    shutil.copytree(made / "walk", blind)
+    (blind / "observations.csv").write_text("frame,point_id,u_px,v_px\n")
+    with pytest.warns(UserWarning, match="fewer than 4 known points"):
+        assert main(["gait-camera", "estimate", str(blind), "--templates", str(made / "templates.json"),
+                     "-o", str(tmp_path / "out")]) == 0
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["n_cycles"] == 0 and summary["form_frames"] == {} and summary["median_reprojection_error_px"] is None
+    assert len(pd.read_csv(tmp_path / "out" / "cycles.csv")) == 0
+

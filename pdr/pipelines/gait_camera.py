@@ -25,6 +25,7 @@ import warnings
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pandas as pd
 
 from pdr.errors import InputError
@@ -148,6 +149,10 @@ def load_templates(path: Path) -> FourierFormTemplates:
         raise InputError(f"{path}: expected complete templates, found a damaged file ({exc})") from None
 
 
+def _finite_or_none(x) -> float | None:
+    return float(x) if np.isfinite(x) else None
+
+
 def estimate_gait(folder: Path, templates_path: Path, out: Path, *, force: bool = False) -> str:
     """``pdr gait-camera estimate DIR --templates F -o OUT``: walking state, form and joint positions per frame.
     Returns the one-line summary."""
@@ -165,7 +170,7 @@ def estimate_gait(folder: Path, templates_path: Path, out: Path, *, force: bool 
     summary = {"n_frames": int(len(st)), "n_cycles": int(len(est.cycles_)),
                "form_frames": {str(k): int(v) for k, v in forms.value_counts().sort_index().items()},
                "n_predicted_only": int(est.n_predicted_only_), "n_relocalised": int(est.n_relocalised_),
-               "median_reprojection_error_px": float(st["reprojection_error_px"].median()) if len(st) else None,
+               "median_reprojection_error_px": _finite_or_none(st["reprojection_error_px"].median()) if len(st) else None,
                "time_s": round(float(est.time_s_), 3), "forms": templates.forms_}
     with atomic_dir(out, force=force) as tmp:
         write_csv(tmp / "states.csv", st)
