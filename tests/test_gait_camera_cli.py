@@ -131,4 +131,9 @@ def test_a_folder_without_corners_in_view_gives_a_warning_and_empty_results(made
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert summary["n_cycles"] == 0 and summary["form_frames"] == {} and summary["median_reprojection_error_px"] is None
     assert len(pd.read_csv(tmp_path / "out" / "cycles.csv")) == 0
+    (blind / "frames.csv").write_text("t_s\n")  # no frame at all
+    with pytest.warns(UserWarning, match="no frames"):
+        assert main(["gait-camera", "estimate", str(blind), "--templates", str(made / "templates.json"),
+                     "-o", str(tmp_path / "out0")]) == 0
+    assert json.loads((tmp_path / "out0" / "summary.json").read_text())["n_frames"] == 0
 

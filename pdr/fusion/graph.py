@@ -601,7 +601,7 @@ class FactorGraphFusion(Algorithm):
         params.setMaxIterations(100)
         params.setOrderingType("METIS")
         # a pose chain with unary fixes has little fill-in: the sequential factorisation needs less memory than the
-        # multifrontal one (100,000 steps: 660 MB instead of 800 MB peak) and is faster, with the same solution
+        # multifrontal one (100,000 steps: 670 MB instead of 810 MB peak) and is faster, with the same solution
         params.setLinearSolverType("SEQUENTIAL_CHOLESKY")
         try:
             optimizer = gtsam.LevenbergMarquardtOptimizer(graph, initial, params)

@@ -170,7 +170,7 @@ def estimate_gait(folder: Path, templates_path: Path, out: Path, *, force: bool 
     summary = {"n_frames": int(len(st)), "n_cycles": int(len(est.cycles_)),
                "form_frames": {str(k): int(v) for k, v in forms.value_counts().sort_index().items()},
                "n_predicted_only": int(est.n_predicted_only_), "n_relocalised": int(est.n_relocalised_),
-               "median_reprojection_error_px": _finite_or_none(st["reprojection_error_px"].median()) if len(st) else None,
+               "median_reprojection_error_px": _finite_or_none(st.get("reprojection_error_px", pd.Series(dtype=float)).median()),
                "time_s": round(float(est.time_s_), 3), "forms": templates.forms_}
     with atomic_dir(out, force=force) as tmp:
         write_csv(tmp / "states.csv", st)
