@@ -25,7 +25,7 @@ demo: $(VENV)/.installed
 test: $(VENV)/.installed-dev
 	$(BIN)/python -m pytest
 
-# The long fuzz of tests/test_fuzz.py: PDR_FUZZ_EXAMPLES cases per target (default 1,200; 11 targets: > 10,000
+# The long fuzz of tests/test_fuzz.py: PDR_FUZZ_EXAMPLES cases per target (default 1,200; 12 targets: > 10,000
 # cases), counts in out/fuzz/stats.json. `make test` runs the short profile (25 derandomised cases per target).
 fuzz: $(VENV)/.installed-dev
 	PDR_FUZZ=long $(BIN)/python -m pytest -q tests/test_fuzz.py

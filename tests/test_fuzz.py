@@ -1,4 +1,5 @@
-"""Fuzzing (hypothesis) of every importer of ``pdr import`` and of ``pdr validate``, through the CLI ``main(argv)``.
+"""Fuzzing (hypothesis) of every importer of ``pdr import``, of ``pdr validate`` and of ``pdr gait-camera estimate``,
+through the CLI ``main(argv)``.
 
 Each case takes a small valid source (trimmed real data from ``datasets/`` or the hand-written exports of
 ``tests/importers/``), damages one of its files with one to three mutations (random truncation, random bytes, swapped
@@ -13,7 +14,7 @@ and runs the command. The property:
 - never a hang: each case runs under a ``SIGALRM`` of ``CASE_TIMEOUT_S``.
 
 Profiles (environment ``PDR_FUZZ``): ``short`` (default, in ``make test``: a few derandomised examples per target,
-under a minute in all) and ``long`` (``make fuzz``: ``PDR_FUZZ_EXAMPLES`` per target, default 1,200, over 11
+under a minute in all) and ``long`` (``make fuzz``: ``PDR_FUZZ_EXAMPLES`` per target, default 1,200, over 12
 targets: > 10,000 cases; counts and the slowest case go to ``out/fuzz/stats.json``).
 Every crash found is kept below as an explicit ``@example`` of the target that found it.
 """
@@ -478,6 +479,47 @@ def test_fuzz_validate(seeds, ops, pick):
             assert np.isfinite(loaded.imu.to_numpy()).all() and (np.diff(t) > 0).all()
             if loaded.gnss is not None:
                 assert (np.diff(loaded.gnss["t_s"].to_numpy()) > 0).all()
+
+
+@pytest.fixture(scope="module")
+def thigh_camera(tmp_path_factory) -> dict[str, Path]:
+    """A short simulated thigh-camera folder (1.5 s, every 4th frame kept) and templates to estimate it with."""
+    from pdr.pipelines.gait_camera import fit_templates, write_thigh_camera
+    from pdr.sim.thigh_camera import form_walk, simulate_thigh_camera, training_table
+
+    root = tmp_path_factory.mktemp("thigh_camera")
+    plan = [("walk", 7.0, 1.3), ("fast_walk", 7.0, 1.8), ("walk", 7.0, 1.3)]
+    training_table([plan], subject_seed=1, walk_seeds=[21]).to_csv(root / "mocap.csv", index=False)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        fit_templates([root / "mocap.csv"], root / "templates.json")
+    walk = form_walk([("walk", 4.0, 1.25)], subject_seed=1, walk_seed=5)
+    sim = simulate_thigh_camera(walk, t_start_s=walk.t_walk_s[0], t_end_s=walk.t_walk_s[0] + 1.5, seed=5)
+    return {"folder": write_thigh_camera(root / "walk", sim), "templates": root / "templates.json"}
+
+
+@FUZZ
+@given(ops=MUTATIONS, pick=st.integers(0, 3))
+@example(ops=[("bytes", 1.0, b"\x00", False)], pick=1)  # text in frames.csv t_s: float conversion (fixed: _numeric)
+@example(ops=[("number", 0.0, b"99999999999999999999")], pick=0)  # a TOML integer past float64 (ThighCameraModel)
+def test_fuzz_gait_camera(thigh_camera, ops, pick):
+    # the thigh-camera folder of `pdr gait-camera estimate` (an input beyond CONTRACT.md): camera.toml, frames,
+    # observations, points
+    with tempfile.TemporaryDirectory(prefix="pdr-fuzz-") as tmp:
+        case = Path(tmp)
+        folder = case / "walk"
+        shutil.copytree(thigh_camera["folder"], folder, ignore=shutil.ignore_patterns("reference"))
+        victim = sorted(p for p in folder.iterdir() if p.is_file())[pick]
+        victim.write_bytes(mutate(victim.read_bytes(), ops))
+        dest = case / "out" / "est"
+        rc, out, err = run_cli(["gait-camera", "estimate", folder, "--templates", thigh_camera["templates"], "-o", dest],
+                               case, "gait_camera")
+        check_outcome(rc, out, err, recordings=False)
+        assert (rc == 0) == dest.is_dir()
+        if rc == 0:
+            assert sorted(p.name for p in dest.iterdir()) == ["cycles.csv", "joints.csv", "states.csv", "summary.json"]
+        hidden = list(case.rglob(".*"))
+        assert not hidden, f"temporary output left behind: {hidden}"
 
 
 def test_mutations_do_what_they_say():

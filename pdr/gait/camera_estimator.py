@@ -106,10 +106,15 @@ class ThighCameraModel:
     def __post_init__(self):
         if self.side not in SIDES:
             raise InputError(f"thigh camera: expected side 'left' or 'right', found {self.side!r}")
-        for k in ("fps", "focal_px", "width_px", "height_px"):
+        positive = ("fps", "focal_px", "width_px", "height_px", "along_thigh_m")
+        for k in positive + ("cx_px", "cy_px", "outward_m", "tilt_out_deg"):
             v = getattr(self, k)
-            if not np.isfinite(v) or v <= 0:
-                raise InputError(f"thigh camera: expected a positive {k}, found {v!r}")
+            try:
+                x = float(v)
+            except (TypeError, ValueError, OverflowError):
+                x = float("nan")
+            if not np.isfinite(x) or (k in positive and x <= 0):
+                raise InputError(f"thigh camera: expected a {'positive ' if k in positive else ''}number for {k}, found {v!r}")
 
     @property
     def _out(self) -> float:
@@ -150,6 +155,19 @@ def _check_table(df: pd.DataFrame, columns: list[str], what: str) -> None:
     missing = [c for c in columns if c not in df.columns]
     if missing:
         raise InputError(f"{what}: expected columns {', '.join(missing)}, found {', '.join(map(str, df.columns)) or 'none'}")
+
+
+def _numeric(df: pd.DataFrame, columns: list[str], what: str, also: list[str] = ()) -> pd.DataFrame:
+    """``df`` with ``columns`` as numbers (and ``also`` present); text in them is an InputError naming the column."""
+    _check_table(df, list(columns) + list(also), what)
+    out = df.copy()
+    for c in columns:
+        values = pd.to_numeric(out[c], errors="coerce")
+        bad = values.isna() & out[c].notna()
+        if bad.any():
+            raise InputError(f"{what}: expected numbers in {c}, found {out[c][bad].iloc[0]!r}")
+        out[c] = values.astype(float)
+    return out
 
 
 def body_frame_parameters(mocap: pd.DataFrame) -> pd.DataFrame:
@@ -695,9 +713,9 @@ class WearableCameraGaitEstimation:
         """
         import time
 
-        _check_table(frames, ["t_s"], "thigh camera frames")
-        _check_table(observations, ["frame", "point_id", "u_px", "v_px"], "thigh camera observations")
-        _check_table(points, ["point_id", "e_m", "n_m", "u_m"], "ground points")
+        frames = _numeric(frames, ["t_s"], "thigh camera frames")
+        observations = _numeric(observations, ["frame", "u_px", "v_px"], "thigh camera observations", also=["point_id"])
+        points = _numeric(points, ["e_m", "n_m", "u_m"], "ground points", also=["point_id"])
         t = frames["t_s"].to_numpy(float)
         if len(t) == 0:
             warnings.warn("thigh camera: no frames; empty estimate", stacklevel=2)
