@@ -4,7 +4,9 @@ The truth is ``pdr.sim.gait.WalkKinematics`` (speed-blended walking/running Four
 and stance, per-step variability, pelvic rotation/obliquity/sway, stance feet on a rocker sole, inverse kinematics)
 seen by ``pdr.sim.thigh_camera`` (chessboard corners, 1 px noise, 15% missed, 5% mislabelled or spurious). The
 estimator's forms are learnt from other walks of the same simulated person (the paper builds its forms per person),
-and, as a harder case, from another person of the same height. Walks turn by 90 deg on a 30 x 12 m loop.
+and, as a harder case, from another person of the same height. Walks turn by 90 deg on a 30 x 12 m loop. Test walks:
+seeds 3-6 with the person's own forms, seed 3 with the other person's (quick: seed 3, a shorter plan). Scores:
+:func:`pdr.eval.gait_camera.score_gait_camera`.
 """
 
 from __future__ import annotations
