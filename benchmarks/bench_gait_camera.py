@@ -5,7 +5,8 @@ and stance, per-step variability, pelvic rotation/obliquity/sway, stance feet on
 seen by ``pdr.sim.thigh_camera`` (chessboard corners, 1 px noise, 15% missed, 5% mislabelled or spurious). The
 estimator's forms are learnt from other walks of the same simulated person (the paper builds its forms per person),
 and, as a harder case, from another person of the same height. Walks turn by 90 deg on a 30 x 12 m loop. Test walks:
-seeds 3-6 with the person's own forms, seed 3 with the other person's (quick: seed 3, a shorter plan). Scores:
+person 1 seeds 3-6 and persons 2 and 3 seed 3 with their own forms, person 1 seed 3 with person 2's (quick: person 1
+seed 3, a shorter plan). Scores:
 :func:`pdr.eval.gait_camera.score_gait_camera`.
 """
 
@@ -21,6 +22,7 @@ AREA = "gait_camera"
 PAPER = "Watanabe et al. 2011"
 SUBJECT = 1
 OTHER_SUBJECT = 2
+OTHER_PEOPLE = (2, 3)  # more simulated people, each with their own forms
 _V = FORM_SPEEDS_MPS
 _UP = [("slow_walk", 10.0, _V["slow_walk"]), ("walk", 10.0, _V["walk"]), ("fast_walk", 10.0, _V["fast_walk"]), ("run", 10.0, _V["run"])]
 TRAINING_PLANS = [_UP + _UP[::-1][1:], _UP[::-1] + _UP[1:]]  # up and down the speeds: the transition diagram
@@ -63,13 +65,14 @@ def run(quick: bool = False) -> list[dict]:
     cases = [("own forms", own, SUBJECT, 3)]
     if not quick:
         cases += [("own forms", own, SUBJECT, seed) for seed in (4, 5, 6)]
+        cases += [("own forms", templates_for(person), person, 3) for person in OTHER_PEOPLE]
         cases += [("other person's forms", templates_for(OTHER_SUBJECT), SUBJECT, 3)]
     plan = QUICK_PLAN if quick else TEST_PLAN
     for label, templates, subject, seed in cases:
         sim = simulate_thigh_camera(form_walk(plan, subject_seed=subject, walk_seed=seed), seed=seed)
         est = estimate(sim, templates)
         s = score(sim, est)
-        case = (f"{s['duration_s']:.0f} s walk (seed {seed}), slow/walk/fast/run, turns, {label}, "
+        case = (f"{s['duration_s']:.0f} s walk of person {subject} (seed {seed}), slow/walk/fast/run, turns, {label}, "
                 f"{s['n_frames']} frames at {sim.camera.fps:.0f} fps")
         rows += [
             _row(case, "mean joint position error (7 joints)", 100 * s["joint_mean_m"], "cm", "<= 5",
