@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from pdr.errors import InputError
+from pdr.errors import InputError, check_keys
 from pdr.foot import DoubleFeetCalibration, FootStepTrackerStride, ZeroVelocityDetection, ZuptInsStride
 from pdr.foot._checks import check_pair, foot_imu_arrays, saturated_samples
 from pdr.io.recording import Recording
@@ -63,10 +63,7 @@ def foot_strides(rec: Recording, config: dict) -> pd.DataFrame | None:
     if not imus:
         return None
     section: dict[str, Any] = dict((config or {}).get("foot", {}))
-    unknown = sorted(set(section) - SECTION_KEYS)
-    if unknown:
-        raise InputError(f"configuration [foot]: unknown key(s) {', '.join(unknown)}; expected some of: "
-                         f"{', '.join(sorted(SECTION_KEYS))}")
+    check_keys(section, sorted(SECTION_KEYS), "configuration [foot]")
     method = section.get("method", "zupt_ins")
     if method not in METHODS:
         raise InputError(f"configuration [foot]: expected method one of {', '.join(METHODS)}, found {method!r}")

@@ -21,14 +21,13 @@ writes ``states.csv``, ``joints.csv``, ``cycles.csv`` and ``summary.json`` into 
 from __future__ import annotations
 
 import json
-import warnings
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pandas as pd
 
-from pdr.errors import InputError
+from pdr.errors import InputError, check_keys
 from pdr.gait.camera_estimator import MOCAP_COLUMNS, FourierFormTemplates, ThighCameraModel, WearableCameraGaitEstimation
 from pdr.io.atomic import atomic_dir, write_csv, write_text
 from pdr.io.recording import read_csv
@@ -47,9 +46,7 @@ def _section(doc: dict, name: str, keys: tuple[str, ...], what: str, required: b
     sec = doc.get(name) or {}
     if not isinstance(sec, dict):
         raise InputError(f"{what}: expected a [{name}] table, found {type(sec).__name__}")
-    unknown = sorted(set(sec) - set(keys))
-    if unknown:
-        raise InputError(f"{what} [{name}]: unknown key(s) {', '.join(unknown)}; expected some of: {', '.join(keys)}")
+    check_keys(sec, keys, f"{what} [{name}]")
     missing = [k for k in keys if k not in sec] if required else []
     if missing:
         raise InputError(f"{what} [{name}]: expected {', '.join(missing)}, found none")
@@ -106,9 +103,7 @@ def simulate_thigh_camera_to_disk(config_path: Path, out: Path, *, seed: int = 0
 
     what = str(config_path)
     doc = read_toml(config_path, what=what)
-    unknown = sorted(set(doc) - {"subject", "segment", "camera", "mount", "simulation"})
-    if unknown:
-        raise InputError(f"{what}: unknown table(s) {', '.join(unknown)}; expected subject, segment, camera, mount")
+    check_keys(doc, ("subject", "segment", "camera", "mount", "simulation"), what, what="table")
     subject = _section(doc, "subject", ("seed", "height_m"), what, required=False)
     segments = doc.get("segment") or []
     if not isinstance(segments, list) or not segments:
@@ -159,12 +154,8 @@ def estimate_gait(folder: Path, templates_path: Path, out: Path, *, force: bool 
     templates = load_templates(templates_path)
     camera, start, frames, observations, points = read_thigh_camera(folder)
     est = WearableCameraGaitEstimation(templates=templates, camera=camera)
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        est.estimate(frames, observations, points, initial_e_m=start["e_m"], initial_n_m=start["n_m"],
-                     initial_heading_rad=start["heading_rad"])
-    for w in caught:
-        warnings.warn(str(w.message), stacklevel=2)
+    est.estimate(frames, observations, points, initial_e_m=start["e_m"], initial_n_m=start["n_m"],
+                 initial_heading_rad=start["heading_rad"])
     st = est.states_
     forms = st["form"][st["form"].astype(bool)]
     summary = {"n_frames": int(len(st)), "n_cycles": int(len(est.cycles_)),

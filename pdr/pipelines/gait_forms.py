@@ -21,7 +21,7 @@ import numpy as np
 import pandas as pd
 
 from pdr.config import load_config
-from pdr.errors import InputError
+from pdr.errors import InputError, check_keys
 from pdr.eval.metrics import match_events
 from pdr.gait.cycles import empty_cycles, foot_cycles, foot_layout, imu_cycles, imu_layout
 from pdr.gait.forms import FORMS_COLUMNS, LEG_LENGTH_PER_HEIGHT, FourierGaitForms, load_forms
@@ -114,10 +114,7 @@ def step_forms(steps: pd.DataFrame, labelled: pd.DataFrame) -> np.ndarray:
 
 def _checked(section: dict[str, Any]) -> dict[str, Any]:
     """A ``[gait_forms]`` configuration section whose keys are all known."""
-    unknown = sorted(set(section) - GAIT_FORMS_KEYS)
-    if unknown:
-        raise InputError(f"configuration [gait_forms]: unknown key(s) {', '.join(unknown)}; expected some of: "
-                         f"{', '.join(sorted(GAIT_FORMS_KEYS))}")
+    check_keys(section, sorted(GAIT_FORMS_KEYS), "configuration [gait_forms]")
     return section
 
 

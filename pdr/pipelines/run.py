@@ -20,7 +20,7 @@ import pandas as pd
 
 from pdr import __version__
 from pdr.config import load_config
-from pdr.errors import InputError
+from pdr.errors import InputError, check_keys
 from pdr.fusion import EkfFusion, FactorGraphFusion, IncrementalFusion
 from pdr.geo import latlon_to_en
 from pdr.heading import AttitudeStepHeading
@@ -59,9 +59,7 @@ def gnss_settings(config: dict[str, Any]) -> dict[str, Any]:
     GNSS-denied runs from recordings that have GNSS). The accuracy given to fixes without ``h_acc_m`` is the fusion's
     ``default_h_acc_m`` (``[fusion]``)."""
     section = dict(config.get("gnss", {}))
-    unknown = sorted(set(section) - set(GNSS_KEYS))
-    if unknown:
-        raise InputError(f"configuration [gnss]: unknown key(s) {', '.join(unknown)}; expected some of: {', '.join(GNSS_KEYS)}")
+    check_keys(section, GNSS_KEYS, "configuration [gnss]")
     intervals = section.get("mask_intervals_s", [])
     ok = isinstance(intervals, list) and all(
         isinstance(iv, list) and len(iv) == 2 and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in iv)

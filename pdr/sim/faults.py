@@ -38,7 +38,7 @@ import numpy as np
 import pandas as pd
 
 from pdr.constants import GRAVITY_MPS2
-from pdr.errors import InputError
+from pdr.errors import InputError, check_keys
 from pdr.geo import en_to_latlon, latlon_to_en
 from pdr.io.recording import ACC_COLUMNS, GYR_COLUMNS, MAG_COLUMNS, Recording
 
@@ -52,9 +52,7 @@ RANDOM_KEYS = {"fraction", "kinds", "min_s", "max_s", "start_s"}
 def _check(fault: dict[str, Any], i: int) -> dict[str, Any]:
     if not isinstance(fault, dict):
         raise InputError(f"fault {i + 1}: expected a table, found {type(fault).__name__}")
-    unknown = sorted(set(fault) - KEYS)
-    if unknown:
-        raise InputError(f"fault {i + 1}: unknown key(s) {', '.join(unknown)}; expected some of: {', '.join(sorted(KEYS))}")
+    check_keys(fault, sorted(KEYS), f"fault {i + 1}")
     if fault.get("kind") not in FAULT_KINDS:
         raise InputError(f"fault {i + 1}: expected kind one of {', '.join(FAULT_KINDS)}, found {fault.get('kind')!r}")
     for key in ("t_start_s", "duration_s"):
@@ -229,10 +227,7 @@ def scenario_faults(raw: dict[str, Any], duration_s: float, seed: int) -> list[d
     if spec is not None:
         if not isinstance(spec, dict):
             raise InputError("scenario [faults]: expected a table (fraction, kinds, min_s, max_s, start_s)")
-        unknown = sorted(set(spec) - RANDOM_KEYS)
-        if unknown:
-            raise InputError(f"scenario [faults]: unknown key(s) {', '.join(unknown)}; expected some of: "
-                             f"{', '.join(sorted(RANDOM_KEYS))}")
+        check_keys(spec, sorted(RANDOM_KEYS), "scenario [faults]")
         for key in ("fraction", "min_s", "max_s", "start_s"):
             if key in spec and (isinstance(spec[key], bool) or not isinstance(spec[key], (int, float))):
                 raise InputError(f"scenario [faults] {key}: expected a number, found {spec[key]!r}")

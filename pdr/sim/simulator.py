@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from pdr.errors import InputError
+from pdr.errors import InputError, check_keys
 from pdr.geo import en_to_latlon
 from pdr.io.recording import Recording, save_recording
 from pdr.io.tomlio import read_toml
@@ -83,9 +83,7 @@ def _dataclass_from(cls, section: str, table: dict):
     names = {f.name: f for f in dataclasses.fields(cls)}
     if not isinstance(table, dict):
         raise InputError(f"scenario [{section}]: expected a table, found {type(table).__name__}")
-    unknown = sorted(set(table) - set(names))
-    if unknown:
-        raise InputError(f"scenario [{section}]: unknown key(s) {', '.join(unknown)}; expected some of: {', '.join(names)}")
+    check_keys(table, list(names), f"scenario [{section}]")
     kwargs = {}
     for key, value in table.items():
         default = names[key].default
@@ -132,9 +130,7 @@ def parse_scenario(raw: dict[str, Any], default_id: str = "sim") -> Scenario:
     """Check a parsed scenario file and fill the defaults; every problem is an InputError naming the key."""
     if not isinstance(raw, dict):
         raise InputError("scenario: expected TOML tables, found something else")
-    unknown = sorted(set(raw) - set(SECTIONS))
-    if unknown:
-        raise InputError(f"scenario: unknown table(s) {', '.join(unknown)}; expected some of: {', '.join(SECTIONS)}")
+    check_keys(raw, SECTIONS, "scenario", what="table")
     sim = _typed("simulation", raw.get("simulation", {}), KEYS["simulation"])
     segments = raw.get("segment")
     if not isinstance(segments, list) or not segments:
