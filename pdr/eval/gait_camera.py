@@ -13,11 +13,7 @@ import numpy as np
 import pandas as pd
 
 from pdr.errors import InputError
-from pdr.gait.camera_estimator import JOINTS
-
-
-def _joint_cols(joint: str) -> list[str]:
-    return [f"{joint}_{a}_m" for a in "enu"]
+from pdr.gait.camera_estimator import JOINTS, joint_columns
 
 
 def score_gait_camera(truth: pd.DataFrame, true_cycles: pd.DataFrame, segments: pd.DataFrame, states: pd.DataFrame,
@@ -28,7 +24,7 @@ def score_gait_camera(truth: pd.DataFrame, true_cycles: pd.DataFrame, segments: 
     if len(truth) != len(states) or len(joints) != len(states):
         raise InputError(f"gait camera evaluation: expected the truth and the estimate on the same frames, found "
                          f"{len(truth)} and {len(states)} rows")
-    err = np.mean([np.linalg.norm(joints[_joint_cols(j)].to_numpy(float) - truth[_joint_cols(j)].to_numpy(float), axis=1)
+    err = np.mean([np.linalg.norm(joints[joint_columns(j)].to_numpy(float) - truth[joint_columns(j)].to_numpy(float), axis=1)
                    for j in JOINTS], axis=0)
     t, form = states["t_s"].to_numpy(float), states["form"].fillna("").to_numpy().astype(str)
     cyc_len = float(np.median(true_cycles.t_end_s - true_cycles.t_start_s)) if len(true_cycles) else np.nan

@@ -33,6 +33,7 @@ import pandas as pd
 
 from pdr.errors import InputError
 from pdr.gait.fourier import DEFAULT_ORDER, fourier_coefficients, fourier_derivative, fourier_design_matrix
+from pdr.io.recording import numeric_frame
 
 TWO_PI = 2.0 * np.pi
 SIDES = ("left", "right")
@@ -141,12 +142,13 @@ class ThighCameraModel:
 # ----------------------------------------------------------------------------------------------------------------
 # Per-form templates
 # ----------------------------------------------------------------------------------------------------------------
-def _joint_cols(joint: str) -> list[str]:
-    return [f"{joint}_{a}_m" for a in ("e", "n", "u")]
+def joint_columns(joint: str) -> list[str]:
+    """The world-position columns of a joint in the motion-capture and joint tables: ``<joint>_{e,n,u}_m``."""
+    return [f"{joint}_{a}_m" for a in "enu"]
 
 
 MOCAP_COLUMNS = ["t_s", "e_m", "n_m", "heading_rad", "phase_rad", "phase_rate_radps", "form"] + [
-    c for j in JOINTS for c in _joint_cols(j)]
+    c for j in JOINTS for c in joint_columns(j)]
 
 
 def _check_table(df: pd.DataFrame, columns: list[str], what: str) -> None:
@@ -158,16 +160,9 @@ def _check_table(df: pd.DataFrame, columns: list[str], what: str) -> None:
 
 
 def _numeric(df: pd.DataFrame, columns: list[str], what: str, also: list[str] = ()) -> pd.DataFrame:
-    """``df`` with ``columns`` as numbers (and ``also`` present); text in them is an InputError naming the column."""
+    """``df`` with ``columns`` as numbers (:func:`pdr.io.recording.numeric_frame`) and ``also`` present."""
     _check_table(df, list(columns) + list(also), what)
-    out = df.copy()
-    for c in columns:
-        values = pd.to_numeric(out[c], errors="coerce")
-        bad = values.isna() & out[c].notna()
-        if bad.any():
-            raise InputError(f"{what}: expected numbers in {c}, found {out[c][bad].iloc[0]!r}")
-        out[c] = values.astype(float)
-    return out
+    return df.assign(**numeric_frame(df[list(columns)], what))
 
 
 def body_frame_parameters(mocap: pd.DataFrame) -> pd.DataFrame:
@@ -180,7 +175,7 @@ def body_frame_parameters(mocap: pd.DataFrame) -> pd.DataFrame:
     base = np.stack([mocap["e_m"].to_numpy(float), mocap["n_m"].to_numpy(float), np.zeros(len(psi))], -1)
 
     def body(joint):
-        d = mocap[_joint_cols(joint)].to_numpy(float) - base
+        d = mocap[joint_columns(joint)].to_numpy(float) - base
         return np.stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], d[:, 2]], -1)
 
     out = {}
@@ -846,7 +841,7 @@ class WearableCameraGaitEstimation:
             jp = joint_positions(out_state[ok], out_form[ok], tp)
             for k in JOINTS:
                 joints[k][ok] = jp[k]
-        self.joints_ = pd.DataFrame({"t_s": t, **{f"{k}_{a}_m": joints[k][:, j] for k in JOINTS for j, a in enumerate("enu")}})
+        self.joints_ = pd.DataFrame({"t_s": t, **{c: joints[k][:, j] for k in JOINTS for j, c in enumerate(joint_columns(k))}})
         self.cycles_ = cycles_from_phase(t, out_state[:, 3], self.states_["form"].to_numpy())
         return self
 

@@ -115,7 +115,7 @@ def sample_rate_hz(t_s: np.ndarray) -> float:
 # ----------------------------------------------------------------------------------------------------------------
 
 
-def _numeric_frame(df: pd.DataFrame, what: str) -> pd.DataFrame:
+def numeric_frame(df: pd.DataFrame, what: str) -> pd.DataFrame:
     """Every cell numeric (NaN allowed here, judged later); say where text was found."""
     out = {}
     for col in df.columns:
@@ -179,7 +179,7 @@ def validate_imu(df: pd.DataFrame, what: str = "imu.csv") -> pd.DataFrame:
     unknown = [c for c in df.columns if c not in IMU_COLUMNS]
     if unknown:
         raise InputError(f"{what}: expected only the columns of CONTRACT.md ({', '.join(IMU_COLUMNS)}), found {', '.join(map(str, unknown))}")
-    df = _numeric_frame(df[[c for c in IMU_COLUMNS if c in df.columns]], what)
+    df = numeric_frame(df[[c for c in IMU_COLUMNS if c in df.columns]], what)
     t = df["t_s"].to_numpy()
     check_time(t, what, min_rows=2)
     _check_nan(df, [c for c in df.columns if c != "t_s"], what)
@@ -235,7 +235,7 @@ def validate_gnss(df: pd.DataFrame, what: str = "gnss.csv") -> pd.DataFrame:
     unknown = [c for c in df.columns if c not in GNSS_COLUMNS]
     if unknown:
         raise InputError(f"{what}: expected only the columns {', '.join(GNSS_COLUMNS)}, found {', '.join(map(str, unknown))}")
-    df = _numeric_frame(df[[c for c in GNSS_COLUMNS if c in df.columns]], what)
+    df = numeric_frame(df[[c for c in GNSS_COLUMNS if c in df.columns]], what)
     check_time(df["t_s"].to_numpy(), what)
     if has_ll:
         lat, lon = df["lat_deg"].to_numpy(), df["lon_deg"].to_numpy()
@@ -333,7 +333,7 @@ def load_recording(path: str | Path, *, with_reference: bool = True) -> Recordin
         camera = read_toml(path / "camera.toml", what=f"{path}/camera.toml")
         video = videos[0]
         if (path / "frames.csv").exists():
-            frames = _numeric_frame(read_csv(path / "frames.csv"), f"{path}/frames.csv")
+            frames = numeric_frame(read_csv(path / "frames.csv"), f"{path}/frames.csv")
             if "t_s" not in frames.columns:
                 raise InputError(f"{path}/frames.csv: expected column t_s, found {', '.join(frames.columns)}")
             check_time(frames["t_s"].to_numpy(), f"{path}/frames.csv")

@@ -25,7 +25,7 @@ import pandas as pd
 from scipy.spatial import cKDTree
 
 from pdr.errors import InputError
-from pdr.gait.camera_estimator import JOINTS, ThighCameraModel
+from pdr.gait.camera_estimator import JOINTS, ThighCameraModel, joint_columns
 from pdr.sim.gait import Body, GaitUser, WalkKinematics, plan_walk
 from pdr.sim.route import Route
 
@@ -64,8 +64,8 @@ class FormWalk:
                "phase_rad": 2 * np.pi * ps["phase"], "phase_rate_radps": 2 * np.pi * rate, "form": self.form_at(t)}
         jp = kin.joint_positions_m(t)
         for j in JOINTS:
-            for k, a in enumerate("enu"):
-                out[f"{j}_{a}_m"] = jp[j][:, k]
+            for k, c in enumerate(joint_columns(j)):
+                out[c] = jp[j][:, k]
         return pd.DataFrame(out)
 
     def cycles(self) -> pd.DataFrame:
