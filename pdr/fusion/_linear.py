@@ -16,7 +16,8 @@ from scipy.linalg import solveh_banded
 
 @dataclass
 class StepModelParams:
-    """Regression step model ``length = a + b f + c v`` as arrays: ``theta = [a, b, c]`` and its prior covariance."""
+    """A linear step model ``length = features . theta`` as arrays: ``theta`` and its prior covariance. The
+    regression ``length = a + b f + c v`` has ``theta = [a, b, c]``; a scale of given lengths has ``theta = [k]``."""
 
     theta: np.ndarray
     covariance: np.ndarray

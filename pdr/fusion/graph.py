@@ -17,6 +17,7 @@ from pdr.fusion import factors
 from pdr.fusion._inputs import BOUT_START_HEADING_STD_RAD, Problem, empty_trajectory, prepare, wrap_rad
 from pdr.fusion._linear import (
     SmoothSeries,
+    StepModelParams,
     deviation_design,
     solve_deviation,
     solve_series,
@@ -414,6 +415,7 @@ class FactorGraphFusion(Algorithm):
         scale = np.concatenate([feat_scale, np.full(nb, 0.5 * self.gyro_bias_knot_s ** 2 * mean_speed),
                                 np.full(n_dev, 10.0 * mean_length), mean_stride, [mean_length]])
         step_scale_std = self.step_scale_prior_std
+        step_scale_prior = StepModelParams(np.ones(1), np.array([[self.step_scale_prior_std ** 2]]), 0.0)
 
         def unpack(p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
             b = SmoothSeries(bias.t0_s, bias.knot_s, p[i_bias])
@@ -444,13 +446,11 @@ class FactorGraphFusion(Algorithm):
                 along = self._along_track(poses)
                 out[:3], cov = solve_step_model(along[feats_ok], problem.features[feats_ok],
                                                 problem.step_length_std_m[feats_ok], model_prior)
-            if scale_steps:  # MAP of k in along = k x length + e, prior k ~ N(1, step_scale_prior_std^2)
+            if scale_steps:  # along = k x length + e, prior k ~ N(1, step_scale_prior_std^2)
                 ok = ~problem.gap
-                w = 1.0 / np.square(problem.step_length_std_m[ok])
-                length_ok, info0 = problem.step_length_m[ok], 1.0 / self.step_scale_prior_std ** 2
-                info = float(np.sum(w * length_ok ** 2)) + info0
-                out[i_step_scale] = (float(np.sum(w * length_ok * self._along_track(poses)[ok])) + info0) / info
-                step_scale_std = info ** -0.5
+                k, k_cov = solve_step_model(self._along_track(poses)[ok], problem.step_length_m[ok, None],
+                                            problem.step_length_std_m[ok], step_scale_prior)
+                out[i_step_scale], step_scale_std = float(k[0]), float(np.sqrt(k_cov[0, 0]))
             if estimate_scales:
                 joint = self._joint_step(problem, poses, values, p, unpack, use, absolute, calibrate, feats_ok,
                                          model_prior, src, scale_prior_std, i_scale)
