@@ -3,7 +3,7 @@ simulated walks at slow / normal / fast speeds (``pdr.sim``, both feet, truth = 
 strikes), and the speed on one hour of 200 Hz data from both feet (the real walk tiled).
 
 Recordings are made with the project's importers (``pdr.io.importers``, formats ``gaitmap`` and ``xio``) from
-``datasets/`` (or ``../shared/datasets``) into a temporary folder. The mocap reference is matched to our strides by
+the registry's data folder (``pdr.io.datasets.dataset_dir``) into a temporary folder. The mocap reference is matched to our strides by
 the largest time overlap of (mid-stance to mid-stance) intervals of the same foot. Nothing is tuned per file.
 """
 
@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from pdr.io.datasets import dataset_dir
 from pdr.foot import FootStepTrackerStride, ZuptInsStride
 from pdr.io.importers import import_recordings
 from pdr.io.recording import Recording, load_recording
@@ -31,13 +32,6 @@ LOOP_M = 25.0  # the walked loop, from the x-io README ("about 25 m")
 SIM_SPEEDS_MPS = (0.7, 1.25, 1.75)  # one minute each, standing 3 s before and after each
 SIM_BINS = (("slow (< 1 m/s)", 0.0, 1.0), ("normal (1-1.5 m/s)", 1.0, 1.5), ("fast (> 1.5 m/s)", 1.5, 9.0))
 SIM_ANCHOR = "pdr simulate truth: heel displacement between heel strikes"
-
-
-def _data(name: str) -> Path:
-    for base in (ROOT / "datasets", ROOT / ".." / "shared" / "datasets"):
-        if (base / name).is_dir():
-            return base / name
-    raise FileNotFoundError(name)
 
 
 def _import(fmt: str, src: Path, dest: Path, **kw) -> dict[str, Recording]:
@@ -94,8 +88,8 @@ def run(quick: bool = False) -> list[dict]:
                      "anchor": anchor})
 
     with tempfile.TemporaryDirectory() as tmp:
-        gm = _import("gaitmap", _data("gaitmap_foot_imu_mocap"), Path(tmp) / "gm", rate_hz=204.8)
-        xio = _import("xio", _data("xio_foot_imu_loop_walk") / "short_walk.csv", Path(tmp) / "xio")["short_walk"]
+        gm = _import("gaitmap", dataset_dir("gaitmap_foot_imu_mocap"), Path(tmp) / "gm", rate_hz=204.8)
+        xio = _import("xio", dataset_dir("xio_foot_imu_loop_walk") / "short_walk.csv", Path(tmp) / "xio")["short_walk"]
 
     walk = gm["walk_2x20m"]
     ref = walk.reference["strides"]

@@ -150,13 +150,6 @@ def _row(case: str, metric: str, ours: float, unit: str, target: str, anchor: st
             "anchor": anchor}
 
 
-def _dataset(rel: Path) -> Path:
-    for base in (ROOT / "datasets", ROOT.parent / "shared" / "datasets"):
-        if (base / rel).exists():
-            return base / rel
-    raise FileNotFoundError(f"dataset {rel} not found under datasets/ or ../shared/datasets/")
-
-
 def _steps_with_lengths(rec, config: dict) -> pd.DataFrame:
     """The `pdr run` front end: detected steps + the population regression model's lengths."""
     from pdr.pipelines.steps import detect_steps
@@ -345,7 +338,7 @@ def _humolire_rows() -> list[dict]:
 
     with tempfile.TemporaryDirectory() as tmp, warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        (path,) = import_recordings("humolire", _dataset(HUMOLIRE), Path(tmp) / "humolire")
+        (path,) = import_recordings("humolire", dataset_dir("humolire_phone_landmarks") / HUMOLIRE, Path(tmp) / "humolire")
         rec = load_recording(path)
         steps = _steps_with_lengths(rec, load_config(None))
         landmarks = rec.reference["landmarks"]
@@ -369,6 +362,7 @@ SCALING_SCRIPT = """
 import json, sys, time, warnings
 warnings.simplefilter("ignore")
 from benchmarks.bench_fusion import synthetic_walk
+from pdr.io.datasets import dataset_dir
 from pdr.fusion import FactorGraphFusion, IncrementalFusion
 n, isam = int(sys.argv[1]), sys.argv[2] == "1"
 w = synthetic_walk(duration_s=n / 1.85, seed=0, dropouts=0)

@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from pdr.io.datasets import dataset_dir
 from pdr.foot import ZeroVelocityDetection, ZuptInsStride
 from pdr.gait.forms import TURN_MIN_RAD_PER_CYCLE, FourierGaitForms, load_forms, speed_kind
 from pdr.io.importers import import_recordings
@@ -40,13 +41,6 @@ ROOT = Path(__file__).resolve().parents[1]
 SCENARIO = ROOT / "configs" / "sim" / "gait_forms_mix.toml"
 PAPER = "Watanabe et al.: forms by PCA + k-means of 5th-order Fourier features (no accuracy given)"
 LEVEL_SLOPE_DEG = 10.0
-
-
-def _data(name: str) -> Path:
-    for base in (ROOT / "datasets", ROOT / ".." / "shared" / "datasets"):
-        if (base / name).is_dir():
-            return base / name
-    raise FileNotFoundError(name)
 
 
 def sim_truth(rec, cycles: pd.DataFrame) -> np.ndarray:
@@ -98,7 +92,7 @@ def _distance_errors(paths: list[Path], forms_path: Path) -> dict[str, list[floa
 def _gaitmap_cycles(tmp: Path) -> pd.DataFrame:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        recs = {p.name: load_recording(p) for p in import_recordings("gaitmap", _data("gaitmap_foot_imu_mocap"),
+        recs = {p.name: load_recording(p) for p in import_recordings("gaitmap", dataset_dir("gaitmap_foot_imu_mocap"),
                                                                     tmp / "gm", rate_hz=204.8)}
     label = {"walk_2x20m": "level", "stairs_up": "stairs_up", "stairs_down": "stairs_down"}
     tables = []

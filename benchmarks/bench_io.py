@@ -13,12 +13,13 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from pdr.io.datasets import data_dir
 from pdr.constants import GRAVITY_MPS2
 from pdr.io.importers import import_recordings
 from pdr.io.recording import Recording, load_recording, save_recording
 
 ROOT = Path(__file__).resolve().parents[1]
-DATASETS = ROOT / "datasets"
+DATASETS = data_dir()
 HOUR_ROWS = 360_000  # one hour at 100 Hz
 LOAD_TARGET_S = 1.0
 IMPORTS = [  # case, format, source, rate_hz

@@ -1,5 +1,5 @@
 """A peer side by side: mobgap's ``SlZijlstra`` stride length against pdr's ``ZijlstraStepLength`` (population
-preset) on the Mobilise-D TVS lab lower-back walks in ``datasets/``, both fed the INDIP reference initial contacts of
+preset) on the Mobilise-D TVS lab lower-back walks of the dataset registry, both fed the INDIP reference initial contacts of
 each walking bout, both scored against the INDIP bout distance (``reference/bouts.csv`` ``step_length_sum_m``).
 
 mobgap is not a dependency of pdr (it brings numba, scikit-learn, pingouin and more), so it runs in an environment of

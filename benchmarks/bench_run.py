@@ -9,6 +9,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from pdr.io.datasets import dataset_dir
 from pdr.eval import evaluate_run
 from pdr.io.importers import import_recordings
 from pdr.pipelines.run import run_recording
@@ -19,13 +20,6 @@ HUMOLIRE = Path("humolire_phone_landmarks/data/imus/1/square_2x")
 SIM_SCENARIOS = {"quick": "configs/sim/walk_short.toml", "full": "configs/sim/walk_30min_gps.toml"}
 SIM_SEED = 7
 LADETTO = "Ladetto et al. 2000: 1.8% over 2,300 m with a DGPS-calibrated per-user model"
-
-
-def _dataset(rel: Path) -> Path:
-    for base in (ROOT / "datasets", ROOT.parent / "shared" / "datasets"):
-        if (base / rel).exists():
-            return base / rel
-    raise FileNotFoundError(f"dataset {rel} not found under datasets/ or ../shared/datasets/")
 
 
 def _run_and_evaluate(rec: Path, out: Path) -> tuple[dict, dict, float]:
@@ -61,7 +55,7 @@ def run(quick: bool = False) -> list[dict]:
     with tempfile.TemporaryDirectory(prefix="bench_run_") as tmp:
         tmp_path = Path(tmp)
         if not quick:
-            (rec,) = import_recordings("humolire", _dataset(HUMOLIRE), tmp_path / "humolire")
+            (rec,) = import_recordings("humolire", dataset_dir("humolire_phone_landmarks") / HUMOLIRE, tmp_path / "humolire")
             summary, metrics, elapsed = _run_and_evaluate(Path(rec), tmp_path / "out_humolire")
             rows += _rows("HuMoLiRe square_2x (real phone, 120.8 m, no fixes)", summary, metrics, elapsed,
                           "issue 4: <= 2% with the first two landmarks as fixes; here no fix at all (origin+heading alignment)")

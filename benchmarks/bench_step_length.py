@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from pdr.io.datasets import data_dir
 from pdr.calibration import AdaptiveKalmanCalibration, RecursiveStepCalibration
 from pdr.io.importers import import_recordings
 from pdr.io.recording import Recording, load_recording
@@ -30,7 +31,7 @@ from pdr.steps import acc_norm_signal, step_features
 from pdr.step_length import MODELS, RegressionStepLength, ZijlstraStepLength, with_signal_features
 
 ROOT = Path(__file__).resolve().parents[1]
-DATASETS = ROOT / "datasets" if (ROOT / "datasets" / "mobgap_lowerback_tvs_lab").is_dir() else ROOT.parent / "shared" / "datasets"
+DATASETS = data_dir()
 OUT = ROOT / "out" / "bench"
 AREA = "step_length"
 IC_TOL_S = 0.2  # a detected contact up to this far outside a reference bout still belongs to it

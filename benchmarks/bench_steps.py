@@ -1,6 +1,6 @@
 """Step detection: Oxford step counting (9 phone recordings), mobgap lower-back initial contacts, speed.
 
-Tiny private loaders read the raw files of ``datasets/`` (or ``../shared/datasets``) so the benchmark does not
+Tiny private loaders read the raw files of the registry's data folder (``pdr.io.datasets.dataset_dir``) so the benchmark does not
 depend on the importers. Every recording is reported; nothing is tuned per file.
 """
 
@@ -14,6 +14,7 @@ import numpy as np
 import pandas as pd
 import scipy.io as sio
 
+from pdr.io.datasets import dataset_dir
 from pdr.constants import GRAVITY_MPS2
 from pdr.io.recording import Recording
 from pdr.pipelines.steps import detect_steps
@@ -23,13 +24,6 @@ from pdr.steps import PeakStepDetection, WaveletStepDetection, acc_norm_signal, 
 ROOT = Path(__file__).resolve().parents[1]
 TOL_S = 0.25
 BRAJDIC = "Brajdic & Harle 2013: windowed peak detection < 3% count error"
-
-
-def _data(name: str) -> Path:
-    for base in (ROOT / ".." / "shared" / "datasets", ROOT / "datasets"):  # the full set first (datasets/ holds a subset)
-        if (base / name).is_dir():
-            return base / name
-    raise FileNotFoundError(name)
 
 
 def _imu(t: np.ndarray, acc: np.ndarray, gyr: np.ndarray | None = None) -> pd.DataFrame:
@@ -42,7 +36,7 @@ def _imu(t: np.ndarray, acc: np.ndarray, gyr: np.ndarray | None = None) -> pd.Da
 
 def oxford_recordings() -> list[tuple[str, pd.DataFrame, np.ndarray, float]]:
     """(name, imu, ground-truth step times, app count or NaN) for the 6 validation and 3 optimisation recordings."""
-    root = _data("oxford_step_counter")
+    root = dataset_dir("oxford_step_counter")
     out = []
     for f in sorted((root / "validation").glob("user1_*.csv")):
         a = pd.read_csv(f, header=None).to_numpy(float)
@@ -75,7 +69,7 @@ def mobgap_trials() -> list[tuple[str, pd.DataFrame, np.ndarray, list[tuple[floa
     some walking that the motion capture saw (HA/001 Test11 131-134 s, HA/002 Test11 142-147 s, HA/002 Test5).
     """
     out = []
-    for part in sorted((_data("mobgap_lowerback_tvs_lab") / "lab" / "HA").iterdir()):
+    for part in sorted((dataset_dir("mobgap_lowerback_tvs_lab") / "lab" / "HA").iterdir()):
         tm = sio.loadmat(part / "data.mat", squeeze_me=True, struct_as_record=False)["data"].TimeMeasure1
         for test in tm._fieldnames:
             for trial in getattr(tm, test)._fieldnames:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -9,10 +10,35 @@ import pandas as pd
 import pytest
 
 from pdr.constants import GRAVITY_MPS2
+from pdr.io.datasets import DATA_DIR_VARIABLE, data_dir, missing_files
 from pdr.io.recording import Recording, save_recording
 
 ROOT = Path(__file__).resolve().parents[1]
-DATASETS = ROOT / "datasets"
+DATASETS = data_dir()  # the public recordings of datasets/registry.toml (PDR_DATA_DIR, ../shared/datasets or the cache)
+REQUIRE_REAL_DATA = "PDR_REQUIRE_REAL_DATA"  # set by .ci/run: a missing dataset fails the test instead of skipping it
+
+
+def real_dataset(name: str) -> Path:
+    """The local folder of a registered dataset. Without its files the test is skipped with a reason that says how to
+    get them (failed when PDR_REQUIRE_REAL_DATA is set, as in CI)."""
+    missing = missing_files(name, DATASETS)
+    if missing:
+        reason = (f"real data: {name} not under {DATASETS} ({len(missing)} file(s) missing); run `pdr datasets fetch "
+                  f"{name}` and set {DATA_DIR_VARIABLE}, or place ../shared/datasets beside the repository")
+        if os.environ.get(REQUIRE_REAL_DATA):
+            pytest.fail(reason, pytrace=False)
+        pytest.skip(reason)
+    return DATASETS / name
+
+
+def pytest_configure(config):
+    config.addinivalue_line("markers", "real_data(*names): the test reads these registered datasets (skipped without them)")
+
+
+def pytest_runtest_setup(item):
+    for mark in item.iter_markers("real_data"):
+        for name in mark.args:
+            real_dataset(name)
 
 
 def make_imu(duration_s: float = 10.0, rate_hz: float = 100.0, step_hz: float = 1.8, seed: int = 0) -> pd.DataFrame:

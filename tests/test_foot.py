@@ -28,6 +28,8 @@ from pdr.pipelines.foot import foot_strides
 sys.path.insert(0, str(Path(__file__).parent))
 from foot_sim import simulate_foot_walk  # noqa: E402
 
+from conftest import real_dataset
+
 ROOT = Path(__file__).resolve().parents[1]
 STRIDE_COLUMNS = ["t_start_s", "t_end_s", "foot", "length_m", "length_std_m", "source"]
 
@@ -399,10 +401,7 @@ def test_foot_config_errors():
 
 
 def _dataset(folder: str) -> Path:
-    for base in (ROOT / "datasets", ROOT.parent / "shared" / "datasets"):
-        if (base / folder).is_dir():
-            return base / folder
-    pytest.skip(f"{folder} not found")
+    return real_dataset(folder)
 
 
 @pytest.fixture(scope="module")

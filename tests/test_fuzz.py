@@ -45,8 +45,10 @@ from hypothesis import strategies as st
 from pdr.cli.main import main
 from pdr.io.recording import Recording, load_recording, save_recording
 
+from conftest import DATASETS
+from pdr.io.datasets import missing_files
+
 ROOT = Path(__file__).resolve().parents[1]
-DATASETS = ROOT / "datasets"
 HAND = Path(__file__).resolve().parent / "importers"
 
 PROFILE = os.environ.get("PDR_FUZZ", "short")
@@ -194,28 +196,33 @@ def _head(src: Path, dest: Path, n_lines: int) -> None:
 def seeds(tmp_path_factory) -> dict[str, Path]:
     root = tmp_path_factory.mktemp("seeds")
     out = {}
-    ox = root / "oxford"
-    ox.mkdir()
-    _head(DATASETS / "oxford_step_counter" / "validation" / "user1_armband_1506423438471.csv",
-          ox / "user1_armband_1506423438471.csv", 1200)
-    out["oxford"] = ox / "user1_armband_1506423438471.csv"
-    xio = root / "xio"
-    xio.mkdir()
-    _head(DATASETS / "xio_foot_imu_loop_walk" / "short_walk.csv", xio / "short_walk.csv", 900)
-    out["xio"] = xio / "short_walk.csv"
-    gm = root / "gaitmap"
-    gm.mkdir()
-    _head(DATASETS / "gaitmap_foot_imu_mocap" / "imu_sample.csv", gm / "imu_sample.csv", 700)
-    _head(DATASETS / "gaitmap_foot_imu_mocap" / "imu_sample_healthy_stair_up.csv", gm / "imu_sample_healthy_stair_up.csv", 500)
-    out["gaitmap"] = gm
-    hu = root / "humolire" / "seq"
-    hu.mkdir(parents=True)
-    src = DATASETS / "humolire_phone_landmarks" / "data" / "imus" / "1" / "square_2x"
-    for name in ("accelerometer-calibrated.txt", "gyroscope-calibrated.txt"):
-        _head(src / name, hu / name, 1500)
-    for name in ("keypoints.json", "references.txt", "record.properties"):
-        shutil.copy(src / name, hu / name)
-    out["humolire"] = hu
+    if not missing_files("oxford_step_counter", DATASETS):
+        ox = root / "oxford"
+        ox.mkdir()
+        _head(DATASETS / "oxford_step_counter" / "validation" / "user1_armband_1506423438471.csv",
+              ox / "user1_armband_1506423438471.csv", 1200)
+        out["oxford"] = ox / "user1_armband_1506423438471.csv"
+    if not missing_files("xio_foot_imu_loop_walk", DATASETS):
+        xio = root / "xio"
+        xio.mkdir()
+        _head(DATASETS / "xio_foot_imu_loop_walk" / "short_walk.csv", xio / "short_walk.csv", 900)
+        out["xio"] = xio / "short_walk.csv"
+    if not missing_files("gaitmap_foot_imu_mocap", DATASETS):
+        gm = root / "gaitmap"
+        gm.mkdir()
+        _head(DATASETS / "gaitmap_foot_imu_mocap" / "imu_sample.csv", gm / "imu_sample.csv", 700)
+        _head(DATASETS / "gaitmap_foot_imu_mocap" / "imu_sample_healthy_stair_up.csv",
+              gm / "imu_sample_healthy_stair_up.csv", 500)
+        out["gaitmap"] = gm
+    if not missing_files("humolire_phone_landmarks", DATASETS):
+        hu = root / "humolire" / "seq"
+        hu.mkdir(parents=True)
+        src = DATASETS / "humolire_phone_landmarks" / "data" / "imus" / "1" / "square_2x"
+        for name in ("accelerometer-calibrated.txt", "gyroscope-calibrated.txt"):
+            _head(src / name, hu / name, 1500)
+        for name in ("keypoints.json", "references.txt", "record.properties"):
+            shutil.copy(src / name, hu / name)
+        out["humolire"] = hu
     out["mobgap"] = DATASETS / "mobgap_lowerback_tvs_lab" / "lab" / "HA" / "001"
     out["sensorlogger"] = HAND / "sensorlogger_android"
     out["sensorlogger_ios"] = HAND / "sensorlogger_ios"
@@ -375,6 +382,7 @@ def fuzz_import(fmt: str, seed: Path, ops, pick: int, *, zip_it: bool = False, z
 # ---------------------------------------------------------------------------------------------------------------
 
 
+@pytest.mark.real_data("oxford_step_counter")
 @FUZZ
 @given(ops=MUTATIONS)
 @example(ops=[("rows", 1)])  # one row: IndexError in the clock check (fixed in _common.steady_clock)
@@ -383,6 +391,7 @@ def test_fuzz_oxford(seeds, ops):
     fuzz_import("oxford", seeds["oxford"], ops, 0)
 
 
+@pytest.mark.real_data("xio_foot_imu_loop_walk")
 @FUZZ
 @given(ops=MUTATIONS)
 @example(ops=[("time_jump", 0.5, 1e12)])  # written with 9 digits, t_s repeated: an invalid recording (fixed in save_recording)
@@ -391,6 +400,7 @@ def test_fuzz_xio(seeds, ops):
     fuzz_import("xio", seeds["xio"], ops, 0)
 
 
+@pytest.mark.real_data("gaitmap_foot_imu_mocap")
 @FUZZ
 @given(ops=MUTATIONS, pick=st.integers(0, 1), rate=st.sampled_from([None, "204.8", "102.4"]))
 @example(ops=[("special_run", 0, 0.0, 1, b"1,5")], pick=0, rate=None)  # an extra cell: flat column labels, TypeError
@@ -398,6 +408,7 @@ def test_fuzz_gaitmap(seeds, ops, pick, rate):
     fuzz_import("gaitmap", seeds["gaitmap"], ops, pick, extra=("--rate-hz", rate) if rate else ())
 
 
+@pytest.mark.real_data("humolire_phone_landmarks")
 @FUZZ
 @given(ops=MUTATIONS, pick=st.integers(0, 4))
 def test_fuzz_humolire(seeds, ops, pick):
@@ -411,6 +422,7 @@ BYTE_OPS = st.lists(st.one_of(
 ), min_size=1, max_size=3)
 
 
+@pytest.mark.real_data("mobgap_lowerback_tvs_lab")
 @FUZZ
 @given(ops=BYTE_OPS, pick=st.integers(0, 2))
 def test_fuzz_mobgap(seeds, ops, pick):

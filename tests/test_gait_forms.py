@@ -20,8 +20,10 @@ from pdr.pipelines.gait_forms import classify_forms, recording_cycles
 from pdr.sim.simulator import simulate
 from pdr.signals import estimate_attitude, uniform_imu
 
+from conftest import DATASETS
+
 ROOT = Path(__file__).resolve().parents[1]
-GAITMAP = ROOT / "datasets" / "gaitmap_foot_imu_mocap"
+GAITMAP = DATASETS / "gaitmap_foot_imu_mocap"
 
 # a short mix of the four speed kinds (inside their Froude bands for any simulated height) on a route with corners
 SCENARIO = {
@@ -255,6 +257,7 @@ def test_recording_without_cycles_gives_an_empty_table(sim_recs, tmp_path, small
     assert len(table) == 0 and list(table.columns[:3]) == ["t_start_s", "t_end_s", "form"]
 
 
+@pytest.mark.real_data("gaitmap_foot_imu_mocap")
 def test_shoe_imu_cycles_climb_on_stairs(tmp_path):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

@@ -20,14 +20,17 @@ from pdr.io.importers import import_recordings
 from pdr.io.importers import _common
 from pdr.io.recording import load_recording
 
+from conftest import DATASETS, real_dataset
+
 ROOT = Path(__file__).resolve().parents[1]
-DATASETS = ROOT / "datasets"
 HAND = Path(__file__).resolve().parent / "importers"
 OXFORD = DATASETS / "oxford_step_counter"
 MOBGAP = DATASETS / "mobgap_lowerback_tvs_lab" / "lab" / "HA"
 HUMOLIRE = DATASETS / "humolire_phone_landmarks" / "data" / "imus" / "1" / "square_2x"
 GAITMAP = DATASETS / "gaitmap_foot_imu_mocap"
 XIO = DATASETS / "xio_foot_imu_loop_walk" / "short_walk.csv"
+REAL_FORMATS = {"xio": "xio_foot_imu_loop_walk", "oxford": "oxford_step_counter", "humolire": "humolire_phone_landmarks",
+                "gaitmap": "gaitmap_foot_imu_mocap", "mobgap": "mobgap_lowerback_tvs_lab"}
 
 
 def _import(fmt, src, dest, **kw):
@@ -69,6 +72,7 @@ OXFORD_PLACEMENT = {"armband": "arm", "backpocket": "pocket", "bag": "bag", "fro
 
 @pytest.fixture(scope="module")
 def oxford_validation(tmp_path_factory):
+    real_dataset("oxford_step_counter")
     dest = tmp_path_factory.mktemp("oxford")
     paths, messages = _import("oxford", OXFORD / "validation", dest)
     return paths, messages
@@ -95,6 +99,7 @@ def test_oxford_validation_truth_and_units(oxford_validation):
     assert any("repeats or steps back" in m for m in messages)  # armband and neckpouch repeat a time stamp
 
 
+@pytest.mark.real_data("oxford_step_counter")
 def test_oxford_optimisation_irregular_clock_passes(tmp_path):
     paths, _ = _import("oxford", OXFORD / "optimisation" / "data" / "Samsung_Carmelo_Hard_Purse_1", tmp_path)
     rec = load_recording(paths[0])
@@ -108,6 +113,7 @@ def test_oxford_optimisation_irregular_clock_passes(tmp_path):
 
 @pytest.fixture(scope="module")
 def mobgap_recs(tmp_path_factory):
+    real_dataset("mobgap_lowerback_tvs_lab")
     dest = tmp_path_factory.mktemp("mobgap")
     out = {}
     for participant in ("001", "002"):
@@ -158,6 +164,7 @@ def test_mobgap_turns_subject_and_missing_reference(mobgap_recs):
     assert abs(recs2["Test11_Trial1"].meta["recording"]["start_unix_s"] - 1598007000.388) < 1.0
 
 
+@pytest.mark.real_data("humolire_phone_landmarks")
 def test_humolire_landmarks_and_common_clock(tmp_path):
     paths, _ = _import("humolire", HUMOLIRE, tmp_path)
     rec = load_recording(paths[0])
@@ -177,6 +184,7 @@ def test_humolire_landmarks_and_common_clock(tmp_path):
     assert rec.imu["t_s"].iloc[0] < 0.2 and 80.9 < rec.imu["t_s"].iloc[-1] < 81.4
 
 
+@pytest.mark.real_data("humolire_phone_landmarks")
 def test_humolire_box_average_matches_mean_of_raw_samples(tmp_path):
     """The 200 Hz sample at t is the time-weighted mean of the raw samples within t +- 2.5 ms (checked on raw data)."""
     paths, _ = _import("humolire", HUMOLIRE, tmp_path)
@@ -192,6 +200,7 @@ def test_humolire_box_average_matches_mean_of_raw_samples(tmp_path):
 
 @pytest.fixture(scope="module")
 def gaitmap_recs(tmp_path_factory):
+    real_dataset("gaitmap_foot_imu_mocap")
     dest = tmp_path_factory.mktemp("gaitmap")
     paths, messages = _import("gaitmap", GAITMAP, dest)
     return {p.name: load_recording(p) for p in paths}, messages
@@ -221,6 +230,7 @@ def test_gaitmap_strides_and_feet(gaitmap_recs):
     assert abs(recs["stairs_down"].sample_rate_hz - 204.8) < 1e-3
 
 
+@pytest.mark.real_data("gaitmap_foot_imu_mocap")
 def test_gaitmap_rate_hz_sets_the_clock(tmp_path):
     paths, messages = _import("gaitmap", GAITMAP / "imu_sample.csv", tmp_path, rate_hz=102.4)
     rec = load_recording(paths[0])
@@ -228,6 +238,7 @@ def test_gaitmap_rate_hz_sets_the_clock(tmp_path):
     assert abs(rec.reference["strides"]["t_start_s"].min() - 371 / 102.4) < 1e-6
 
 
+@pytest.mark.real_data("xio_foot_imu_loop_walk")
 def test_xio_repaired_clock_units_and_loop(tmp_path):
     paths, messages = _import("xio", XIO, tmp_path)
     rec = load_recording(paths[0])
@@ -434,6 +445,8 @@ def test_bad_input_exit_1_one_line_no_output(tmp_path, capsys, fmt, case):
                   "humolire": HUMOLIRE / "accelerometer-calibrated.txt", "gaitmap": GAITMAP / "imu_sample.csv",
                   "mobgap": MOBGAP / "001" / "data.mat", "sensorlogger": HAND / "sensorlogger_android" / "TotalAcceleration.csv",
                   "phyphox": HAND / "phyphox_multi" / "Accelerometer.csv"}
+    if fmt in REAL_FORMATS:
+        real_dataset(REAL_FORMATS[fmt])
     real = src_by_fmt[fmt]
     folder_fmt = fmt in ("humolire", "mobgap", "sensorlogger", "phyphox")
     if case == "missing":
@@ -470,6 +483,7 @@ def test_bad_input_exit_1_one_line_no_output(tmp_path, capsys, fmt, case):
     assert _entries(dest) == []
 
 
+@pytest.mark.real_data("mobgap_lowerback_tvs_lab", "gaitmap_foot_imu_mocap")
 def test_existing_recording_needs_force_and_nothing_partial(tmp_path, capsys):
     dest = tmp_path / "recs"
     rc, out, _ = _cli(["import", "mobgap", MOBGAP / "001", dest], capsys)
@@ -485,6 +499,7 @@ def test_existing_recording_needs_force_and_nothing_partial(tmp_path, capsys):
     _assert_one_error(rc, err)
 
 
+@pytest.mark.real_data("gaitmap_foot_imu_mocap")
 def test_cli_prints_one_path_per_recording(tmp_path, capsys):
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # no warning when the rate is given
@@ -539,6 +554,7 @@ def test_phyphox_unsorted_time_repaired(tmp_path):
     assert any("dropped 1 sample" in m for m in messages) and len(rec.imu) == 150
 
 
+@pytest.mark.real_data("oxford_step_counter")
 def test_oxford_optimisation_position_from_folder_name(tmp_path):
     src = tmp_path / "Pixel_Ann_Carpet_InHand_2"
     shutil.copytree(OXFORD / "optimisation" / "data" / "Samsung_Carmelo_Hard_Purse_1", src)

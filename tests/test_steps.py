@@ -11,6 +11,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from conftest import real_dataset
 from pdr.cli.main import main
 from pdr.constants import GRAVITY_MPS2
 from pdr.errors import InputError
@@ -22,7 +23,6 @@ from pdr.steps.features import fft_frequency, spacing_frequency, step_durations,
 from pdr.steps.gait import step_period_from_acf, window_acf
 from pdr.steps.wavelet import neighbour_reference
 
-SHARED = Path(__file__).resolve().parents[1] / ".." / "shared" / "datasets"
 
 
 def rotation(rx: float, ry: float, rz: float) -> np.ndarray:
@@ -292,16 +292,13 @@ def test_cli_steps_smoke(tmp_path, capsys):
 # --- regression on real recordings -----------------------------------------------------------------------------
 
 def _oxford_validation(position: str) -> tuple[pd.DataFrame, int]:
-    for base in (Path(__file__).resolve().parents[1] / "datasets", SHARED):
-        files = sorted((base / "oxford_step_counter" / "validation").glob(f"user1_{position}_*.csv"))
-        if files:
-            a = pd.read_csv(files[0], header=None).to_numpy(float)
-            a = a[np.any(a[:, 1:4] != 0, axis=1)]
-            t = (a[:, 0] - a[0, 0]) / 1e9
-            keep = np.concatenate([[True], np.diff(t) > 0])
-            imu = pd.DataFrame({"t_s": t[keep], "acc_x_mps2": a[keep, 1], "acc_y_mps2": a[keep, 2], "acc_z_mps2": a[keep, 3]})
-            return imu, int(a[-1, 5] - a[0, 5])
-    pytest.skip("Oxford step counter data not found")
+    files = sorted((real_dataset("oxford_step_counter") / "validation").glob(f"user1_{position}_*.csv"))
+    a = pd.read_csv(files[0], header=None).to_numpy(float)
+    a = a[np.any(a[:, 1:4] != 0, axis=1)]
+    t = (a[:, 0] - a[0, 0]) / 1e9
+    keep = np.concatenate([[True], np.diff(t) > 0])
+    imu = pd.DataFrame({"t_s": t[keep], "acc_x_mps2": a[keep, 1], "acc_y_mps2": a[keep, 2], "acc_z_mps2": a[keep, 3]})
+    return imu, int(a[-1, 5] - a[0, 5])
 
 
 @pytest.mark.parametrize("position", ["hand", "backpocket"])

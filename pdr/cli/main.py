@@ -118,6 +118,24 @@ def _cmd_gait_camera(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_datasets(args: argparse.Namespace) -> int:
+    from pdr.io import datasets
+
+    if args.action == "list":
+        root = datasets.data_dir()
+        print(f"data folder: {root} (set {datasets.DATA_DIR_VARIABLE} to change it)")
+        for name, ds in sorted(datasets.load_registry().items()):
+            missing = datasets.missing_files(name, root)
+            state = "present" if not missing else f"missing {len(missing)} of {len(ds.files)} files"
+            print(f"{name}: {ds.title}. {ds.licence}; {ds.repository} @ {ds.commit[:12]}; truth: {ds.ground_truth} [{state}]")
+    elif args.action == "path":
+        print(datasets.dataset_dir(args.name))
+    else:
+        for name in args.names:
+            print(datasets.fetch_dataset(name, Path(args.dir) if args.dir else None))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="pdr", description="Pedestrian dead reckoning by sensor fusion.")
     parser.add_argument("--version", action="version", version=f"pdr {__version__}")
@@ -218,6 +236,20 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("out")
     g.add_argument("folder")
     p.set_defaults(func=_cmd_gait_camera)
+
+    p = sub.add_parser("datasets", help="the public recordings of the registry (datasets/registry.toml)",
+                       description="List the registered public recordings, or download them with their checksums "
+                                   "verified. PDR_DATA_DIR points pdr at a local copy (default: ../shared/datasets "
+                                   "beside the repository, else the download cache).")
+    gsub = p.add_subparsers(dest="action", required=True)
+    gsub.add_parser("list", help="each dataset: source, licence, ground truth, and whether its files are present")
+    g = gsub.add_parser("path", help="print the local folder of a dataset (an error that says how to get it if absent)")
+    g.add_argument("name", metavar="NAME")
+    g = gsub.add_parser("fetch", help="download datasets into the cache (or --dir) and verify each sha256",
+                        description="example: pdr datasets fetch humolire_phone_landmarks --dir data")
+    g.add_argument("names", nargs="+", metavar="NAME")
+    g.add_argument("--dir", default=None, help="destination folder (default: the download cache)")
+    p.set_defaults(func=_cmd_datasets)
     return parser
 
 
