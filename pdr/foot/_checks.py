@@ -1,4 +1,4 @@
-"""Input checks shared by the foot algorithms: a canonical IMU table with gyroscope, saturation, pairs of feet."""
+"""Input checks shared by the foot algorithms: a canonical IMU table with gyroscope, pairs of feet."""
 
 from __future__ import annotations
 
@@ -29,28 +29,6 @@ def foot_imu_arrays(imu: pd.DataFrame, what: str = "foot IMU") -> tuple[np.ndarr
     if not (np.isfinite(acc).all() and np.isfinite(gyr).all()):
         raise InputError(f"{what}: expected finite acceleration and angular rate, found NaN/inf samples")
     return t, acc, gyr
-
-
-def saturated_samples(values: np.ndarray, *, min_run: int = 3, min_abs: float = 0.0) -> np.ndarray:
-    """Samples of a clipped channel: ``min_run`` or more consecutive identical values at ``|value| >= min_abs``
-    that nothing nearby exceeds (a flat top, not a quantised turning point).
-
-    A moving sensor does not hold a large reading; one at the end of its range does. Returns a bool mask (N,).
-    """
-    mask = np.zeros(len(values), dtype=bool)
-    if len(values) < min_run:
-        return mask
-    for ch in range(values.shape[1]):
-        x = values[:, ch]
-        same = np.r_[False, x[1:] == x[:-1]] & (np.abs(x) >= min_abs)
-        # a run of k repeats is k+1 identical samples
-        edges = np.diff(np.r_[0, same.astype(np.int8), 0])
-        for s, e in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)):
-            if e - s + 1 >= min_run:
-                near = np.abs(x[max(s - 1 - 2 * min_run, 0):e + 2 * min_run])
-                if near.max() <= abs(x[s]):
-                    mask[s - 1:e] = True
-    return mask
 
 
 def check_pair(left: pd.DataFrame, right: pd.DataFrame, *, max_offset_s: float = 0.5,

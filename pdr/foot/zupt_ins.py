@@ -15,8 +15,9 @@ from pdr.foot._rotations import align_to_gravity, cumulative_rotations
 from pdr.foot.footstep_tracker import empty_strides
 from pdr.foot.zero_velocity import ZeroVelocityDetection
 
-INS_STRIDE_COLUMNS = ["t_start_s", "t_end_s", "foot", "length_m", "length_std_m", "source", "dx_m", "dy_m", "dz_m",
-                      "heading_rad", "heading_change_rad", "t_swing_start_s", "t_swing_end_s"]
+INS_STRIDE_COLUMNS = ["t_start_s", "t_end_s", "foot", "length_m", "length_std_m", "lateral_std_m", "source", "dx_m",
+                      "dy_m", "dz_m", "heading_rad", "heading_change_rad", "heading_change_std_rad", "t_swing_start_s",
+                      "t_swing_end_s"]
 TRAJECTORY_COLUMNS = ["t_s", "x_m", "y_m", "z_m", "vx_mps", "vy_mps", "vz_mps"]
 
 
@@ -82,7 +83,8 @@ class ZuptInsStride(Algorithm):
         of this foot), ``heading_rad`` (direction of the displacement, in the local frame) and
         ``heading_change_rad`` (since the previous stride of this foot; NaN for the first),
         ``t_swing_start_s, t_swing_end_s`` (the swing between the two stances); ``length_m`` is the
-        horizontal distance, ``length_std_m`` from the filter covariance.
+        horizontal distance; ``length_std_m`` (along the stride), ``lateral_std_m`` (across it) and
+        ``heading_change_std_rad`` (the yaw error accrued over the stride) from the filter covariance.
     position_cov_m2_ : (K, 3, 3) position covariance at each mid-stance.
     final_position_m_ : position (3,) at the middle of the last stance.
     gyr_bias_radps_ : the gyroscope bias removed (zeros when none was estimated).
@@ -100,8 +102,9 @@ class ZuptInsStride(Algorithm):
     updates ``M`` is constant, so the nominal state and the transition matrix over the interval follow in closed form
     from cumulative integrals of ``R_gyr f`` (a handful of numpy operations per update instead of a loop over samples);
     the process noise uses the interval's mean specific force. Updates: ``v = 0`` during stance. Per stride (mid-stance
-    to mid-stance of the same foot) the displacement variance along the stride is ``u' (P_end - P_start) u``
-    (position errors accumulate as independent increments).
+    to mid-stance of the same foot) the displacement variance along the stride is ``u' (P_end - P_start) u``, across it
+    ``n' (P_end - P_start) n`` (position errors accumulate as independent increments), and the heading-change variance
+    is the increment of the yaw-error variance.
 
     Examples
     --------
@@ -211,7 +214,8 @@ class ZuptInsStride(Algorithm):
         pos, cov = ep_p[mid_ep], ep_P[mid_ep][:, 0:3, 0:3]
         self.position_cov_m2_ = cov
         self.final_position_m_ = pos[-1]
-        self.strides_ = self._strides(t[mids], pos, cov, st["t_end_s"].to_numpy(), st["t_start_s"].to_numpy())
+        self.strides_ = self._strides(t[mids], pos, cov, ep_P[mid_ep][:, 8, 8], st["t_end_s"].to_numpy(),
+                                      st["t_start_s"].to_numpy())
         return self
 
     def _epochs(self, st: pd.DataFrame, i0: int, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -242,8 +246,8 @@ class ZuptInsStride(Algorithm):
         return pd.DataFrame({"t_s": t, "x_m": p[:, 0], "y_m": p[:, 1], "z_m": p[:, 2],
                              "vx_mps": v[:, 0], "vy_mps": v[:, 1], "vz_mps": v[:, 2]})
 
-    def _strides(self, t_mid: np.ndarray, pos: np.ndarray, cov: np.ndarray, stance_end: np.ndarray,
-                 stance_start: np.ndarray) -> pd.DataFrame:
+    def _strides(self, t_mid: np.ndarray, pos: np.ndarray, cov: np.ndarray, yaw_var: np.ndarray,
+                 stance_end: np.ndarray, stance_start: np.ndarray) -> pd.DataFrame:
         if len(t_mid) < 2:
             return empty_strides(INS_STRIDE_COLUMNS)
         d = np.diff(pos, axis=0)
@@ -252,10 +256,14 @@ class ZuptInsStride(Algorithm):
         dcov = cov[1:, :2, :2] - cov[:-1, :2, :2]
         var = np.einsum("ni,nij,nj->n", u, dcov, u)
         std = np.sqrt(np.maximum(var, 0.0) + self.min_length_std_m**2)
+        across = np.column_stack([-u[:, 1], u[:, 0]])
+        lateral_var = np.einsum("ni,nij,nj->n", across, dcov, across)
         heading = np.arctan2(d[:, 1], d[:, 0])
         return pd.DataFrame({
             "t_start_s": t_mid[:-1], "t_end_s": t_mid[1:], "foot": self.foot, "length_m": length,
-            "length_std_m": std, "source": "foot_imu", "dx_m": d[:, 0], "dy_m": d[:, 1], "dz_m": d[:, 2],
+            "length_std_m": std, "lateral_std_m": np.sqrt(np.maximum(lateral_var, 0.0) + self.min_length_std_m**2),
+            "source": "foot_imu", "dx_m": d[:, 0], "dy_m": d[:, 1], "dz_m": d[:, 2],
             "heading_rad": heading, "heading_change_rad": np.r_[np.nan, np.diff(np.unwrap(heading))],
+            "heading_change_std_rad": np.sqrt(np.maximum(np.diff(yaw_var), 0.0)),
             "t_swing_start_s": stance_end[:-1], "t_swing_end_s": stance_start[1:],
         })[INS_STRIDE_COLUMNS]

@@ -152,10 +152,15 @@ def prepare(steps: pd.DataFrame, gnss: pd.DataFrame | None, strides: pd.DataFram
     mag = np.where(np.isfinite(mag_std) & (mag_std > 0), mag, np.nan)
 
     epochs = np.concatenate([[t_start_s], t])
-    gap = np.diff(epochs) > max_step_duration_s
+    # a step whose displacement was measured over its whole duration (a foot INS stride across a stop) is no gap
+    measured = (steps["displacement_measured"].fillna(False).to_numpy(bool) if "displacement_measured" in steps.columns
+                else np.zeros(len(t), bool))
+    gap = (np.diff(epochs) > max_step_duration_s) & ~measured
     gap_std = gap_speed_std_mps * np.diff(epochs)
     length_std = np.where(gap, np.maximum(length_std, gap_std), length_std)
-    lateral = np.where(gap, gap_std, lateral_std_m)
+    own_lateral = _column_or(steps, "lateral_std_m", "steps", np.nan)
+    lateral = np.where(np.isfinite(own_lateral) & (own_lateral > 0), own_lateral, lateral_std_m)
+    lateral = np.where(gap, gap_std, lateral)
     problem = Problem(epoch_t_s=epochs, step_length_m=length, step_length_std_m=length_std, lateral_std_m=lateral, gap=gap,
                       dtheta_rad=dtheta, dtheta_std_rad=dtheta_std, heading0_rad=heading0, features=features,
                       mag_rad=mag, mag_std_rad=mag_std)

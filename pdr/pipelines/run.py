@@ -27,7 +27,7 @@ from pdr.heading import AttitudeStepHeading
 from pdr.io.atomic import atomic_dir
 from pdr.io.recording import Recording, load_recording
 from pdr.pipelines.faults import rejected_gnss, sensor_faults, warning_line, warning_objects, widen_steps
-from pdr.pipelines.foot import foot_strides
+from pdr.pipelines.foot import foot_chain, foot_strides
 from pdr.pipelines.gait_forms import per_form_step_lengths
 from pdr.pipelines.leg_camera import camera_strides
 from pdr.pipelines.steps import detect_steps, make_detector
@@ -204,10 +204,15 @@ def run_recording(rec: Path, out: Path, *, config_path=None, model_path=None, us
         gnss_suspect = faults.gnss_suspect_ if gnss is not None else None
         lap("faults_s")
 
-        fusion.fuse(steps, gnss=fusion_gnss(gnss if gnss is None else gnss.assign(masked=gnss["masked"] | gnss_suspect)),
-                    strides=strides, step_model=model)
+        # with foot INS strides the graph's chain is the INS path (relative poses between mid-stances), not the steps
+        chain = foot_chain(strides)
+        fusion.fuse(steps if chain is None else chain[0],
+                    gnss=fusion_gnss(gnss if gnss is None else gnss.assign(masked=gnss["masked"] | gnss_suspect)),
+                    strides=strides if chain is None else chain[1], step_model=model)
         traj = fusion.trajectory_.reset_index(drop=True)
-        if len(steps):
+        if chain is not None:
+            model = fusion.step_model_ if fusion.step_model_ is not None else model
+        elif len(steps):
             steps["step_length_m"] = np.asarray(fusion.step_length_m_, float)
             model = fusion.step_model_ if fusion.step_model_ is not None else model
         else:

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 import pandas as pd
+from scipy.ndimage import maximum_filter1d, minimum_filter1d
 
 from pdr.base import Algorithm
 from pdr.constants import GRAVITY_MPS2
@@ -40,6 +41,7 @@ MIN_FULL_SCALE = {"acc": 2.0 * GRAVITY_MPS2 * 0.95, "gyr": np.radians(125.0) * 0
 _MAD_TO_SIGMA = 1.4826
 MAG_DERIVATIVE_SMOOTH_S = 0.1  # the field is smoothed over this before its time derivative (noise)
 MAG_ROTATION_FLOOR_UTPS = 5.0  # a residual below this (µT/s) is never a disturbance (a noiseless synthetic file)
+CLIP_WINDOW_S = 2.5  # two gait cycles: a sensor range clips the extreme of every stretch this long around a clip
 GRAVITY_TOLERANCE = 0.02  # |averaged specific force| within 2% of g: the average is gravity (no turn, no speed change)
 
 
@@ -60,6 +62,31 @@ def merge_intervals(intervals: list[tuple[float, float]], join_s: float) -> list
     return [(a, b) for a, b in out]
 
 
+def clipped_samples(values: np.ndarray, rate_hz: float, *, min_run: int = 3, min_abs: float = 0.0) -> np.ndarray:
+    """Samples (bool mask, N) of an (N, C) signal held at the end of its sensor's range: a run of ``min_run`` or
+    more identical samples at the largest (or the smallest) value the channel takes within ``CLIP_WINDOW_S`` on
+    either side, at ``|value| >= min_abs``.
+
+    A clipped channel cannot exceed its range, so its flat tops are the extreme of every stretch around them (a range
+    clips every vigorous stride, and two gait cycles either side hold several); a quantised sensor repeats values
+    at many peaks (the OpenShoe unit at 820 Hz repeats a peak for 3-6 samples), but larger peaks lie around those.
+    """
+    values = np.asarray(values, dtype=float).reshape(len(values), -1)
+    mask = np.zeros(len(values), dtype=bool)
+    if len(values) < min_run:
+        return mask
+    n = 2 * int(round(CLIP_WINDOW_S * rate_hz)) + 1
+    for ch in range(values.shape[1]):
+        x = values[:, ch]
+        top = (x == maximum_filter1d(x, n, mode="nearest")) & (x >= min_abs)
+        bottom = (x == minimum_filter1d(x, n, mode="nearest")) & (x <= -min_abs)
+        for flat in (top, bottom):
+            for a, b in runs(flat & np.r_[False, x[1:] == x[:-1]] | flat & np.r_[x[:-1] == x[1:], False]):
+                if b - a >= min_run:
+                    mask[a:b] = True
+    return mask
+
+
 class SensorFaultDetection(Algorithm):
     """Find the intervals of a recording where a sensor misbehaves, from the data alone.
 
@@ -72,8 +99,9 @@ class SensorFaultDetection(Algorithm):
         stuck. A live MEMS sensor's noise changes its last bits every sample.
     duplicate_window_s, duplicate_min_fraction : a window of this length in which more than this fraction of the
         samples repeat the previous one exactly (and three times the recording's own fraction) has duplicated samples.
-    min_saturated_samples : an axis that holds exactly the same value, beyond the smallest full scale of MEMS
-        sensors (``MIN_FULL_SCALE``), for this many consecutive samples is saturated (clipped).
+    min_saturated_samples : an axis that holds the extreme value of the stretch around it, beyond the smallest full scale of
+        MEMS sensors (``MIN_FULL_SCALE``), for this many consecutive samples is saturated (clipped, see
+        :func:`clipped_samples`).
     rate_tolerance, rate_window_samples, min_rate_change_s : a running median of the sample interval (over this many
         samples) off the recording's median by more than the tolerance (fraction) for this long is a rate change.
     mag_norm_tolerance, mag_dip_tolerance_rad, mag_window_s, min_mag_disturbance_s : the field magnitude (or its dip),
@@ -228,22 +256,9 @@ class SensorFaultDetection(Algorithm):
         return out
 
     def _saturation(self, t, x, sensor) -> list[dict]:
-        # A clipped axis gives a flat top: the same value, beyond the smallest full scale, in consecutive samples,
-        # the samples around it smaller.
-        # A live signal's peak does not repeat to the last bit over that many samples (quantised real data repeats
-        # a peak value twice at most: gaitmap, x-io and Oxford recordings checked).
-        clipped = np.zeros(len(t), bool)
-        levels = []
-        k = int(self.min_saturated_samples)
-        for j in range(x.shape[1]):
-            flat = np.concatenate([[False], np.diff(x[:, j]) == 0]) & (np.abs(x[:, j]) >= MIN_FULL_SCALE[sensor])
-            mag = np.abs(x[:, j])
-            for a, b in runs(flat):
-                # a top: the samples on both sides of the run are smaller in magnitude (a quantised slope is not)
-                top = (a < 2 or mag[a - 2] < mag[a]) and (b >= len(mag) or mag[b] < mag[a])
-                if b - a + 1 >= k and top:
-                    clipped[a - 1:b] = True
-                    levels.append(abs(float(x[a, j])))
+        clipped = clipped_samples(x, 1.0 / float(np.median(np.diff(t))), min_run=int(self.min_saturated_samples),
+                                  min_abs=MIN_FULL_SCALE[sensor])
+        levels = [float(np.abs(x[clipped]).max())] if clipped.any() else []
         out = []
         unit = "m/s²" if sensor == "acc" else "rad/s"
         for a, b in self._intervals(t, clipped):
