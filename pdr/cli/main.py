@@ -14,13 +14,14 @@ from pathlib import Path
 from pdr import __version__
 from pdr.errors import InputError
 
-IMPORT_FORMATS = ("oxford", "mobgap", "humolire", "gaitmap", "xio", "sensorlogger", "phyphox", "gpx")
+IMPORT_FORMATS = ("oxford", "mobgap", "humolire", "gaitmap", "xio", "sensorlogger", "phyphox", "gpx", "openshoe")
 
 
 def _cmd_import(args: argparse.Namespace) -> int:
     from pdr.io.importers import import_recordings
 
-    for path in import_recordings(args.format, Path(args.src), Path(args.dest), rate_hz=args.rate_hz, force=args.force):
+    for path in import_recordings(args.format, Path(args.src), Path(args.dest), rate_hz=args.rate_hz, force=args.force,
+                                  foot=args.foot, closed_loop=args.closed_loop):
         print(path)
     return 0
 
@@ -148,6 +149,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("dest")
     p.add_argument("--rate-hz", type=float, default=None, help="sampling rate of sources that carry only a sample index")
     p.add_argument("--force", action="store_true", help="replace recordings that already exist")
+    p.add_argument("--foot", choices=("left", "right"), default=None,
+                   help="the foot of a single-foot IMU file (openshoe, xio), when its name does not say")
+    p.add_argument("--closed-loop", action="store_true",
+                   help="the walk ends where it started (written to reference/; xio, openshoe)")
     p.set_defaults(func=_cmd_import)
 
     p = sub.add_parser("validate", help="check a recording against CONTRACT.md")

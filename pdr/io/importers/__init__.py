@@ -20,15 +20,18 @@ from pathlib import Path
 
 from pdr.errors import InputError
 
-FORMATS = ("oxford", "mobgap", "humolire", "gaitmap", "xio", "sensorlogger", "phyphox", "gpx")
+FORMATS = ("oxford", "mobgap", "humolire", "gaitmap", "xio", "sensorlogger", "phyphox", "gpx", "openshoe")
 
 
-def import_recordings(fmt: str, src: Path, dest: Path, *, rate_hz: float | None = None, force: bool = False) -> list[Path]:
+def import_recordings(fmt: str, src: Path, dest: Path, *, rate_hz: float | None = None, force: bool = False,
+                      foot: str | None = None, closed_loop: bool = False) -> list[Path]:
     """Convert ``src`` (a file, folder or zip of format ``fmt``) into recordings under ``dest``; return their paths.
 
     For ``gpx``, ``dest`` is an existing recording that receives ``gnss.csv``.
-    ``rate_hz`` is the sampling rate of sources whose files carry only a sample index (gaitmap example data).
-    An existing output folder is an InputError unless ``force``.
+    ``rate_hz`` is the sampling rate of sources whose files carry only a sample index (gaitmap example data, OpenShoe).
+    ``foot`` (``left`` / ``right``) names the foot of a single-foot source (``openshoe``, ``xio``); ``closed_loop``
+    declares that the walk ends where it started (a reference the source itself does not carry: ``xio``,
+    ``openshoe``). An existing output folder is an InputError unless ``force``.
     """
     if fmt not in FORMATS:
         raise InputError(f"import: expected a format among {', '.join(FORMATS)}, found {fmt!r}")
@@ -39,4 +42,9 @@ def import_recordings(fmt: str, src: Path, dest: Path, *, rate_hz: float | None 
         raise InputError(f"{src}: expected a {fmt} source (file or folder), found nothing there")
     src = src.resolve()  # recordings are named after the source: "." or ".." must give the real folder name
     module = importlib.import_module(f"pdr.io.importers.{fmt}")
-    return module.import_source(src, dest, rate_hz=rate_hz, force=force)
+    options = {k: v for k, v in (("foot", foot), ("closed_loop", closed_loop)) if v not in (None, False)}
+    refused = sorted(set(options) - set(getattr(module, "OPTIONS", ())))
+    if refused:
+        flags = ", ".join("--" + k.replace("_", "-") for k in refused)
+        raise InputError(f"import {fmt}: expected no {flags} (the format does not take it), found it given")
+    return module.import_source(src, dest, rate_hz=rate_hz, force=force, **options)

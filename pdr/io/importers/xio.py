@@ -4,11 +4,11 @@ Units are read from the header: gyroscope deg/s -> rad/s (rad/s kept), accelerom
 ``Magnetometer X/Y/Z (uT)`` columns are kept. The logger repeats a time stamp (with the same values) where it missed
 a sample, including the first ones: every sample whose time repeats or steps back is dropped with a warning.
 
-The upstream README does not say which foot carries the sensor: placement ``foot_right`` is assumed (stated in
-``meta.toml`` as ``placement_assumed = true``). The recording is named after the file (``short_walk``).
+The file does not say which foot carries the sensor: ``--foot`` names it; without it placement ``foot_right`` is
+assumed (stated in ``meta.toml`` as ``placement_assumed = true``). The recording is named after the file.
 
-Reference (``summary.toml``): ``loop_closure = true`` (the walk ends where it started, final displacement 0 m),
-``distance_m = 25.0`` with ``distance_approximate = true`` (the upstream README's "about 25 m").
+The CSV carries no ground truth, so no reference is written, except what the user declares: ``--closed-loop`` (the
+walk ends where it started) writes ``reference/summary.toml`` ``loop_closure = true, final_displacement_m = 0``.
 """
 
 from __future__ import annotations
@@ -20,12 +20,13 @@ import numpy as np
 
 from pdr.constants import GRAVITY_MPS2
 from pdr.errors import InputError
+from pdr.io.importers.openshoe import closed_loop_reference
 from pdr.io.importers._common import (
     imu_frame, increasing_mask, numeric_array, read_table, require_finite, safe_id, steady_clock, write_recordings,
 )
 from pdr.io.recording import Recording
 
-LOOP_DISTANCE_M = 25.0  # approximate, from the upstream README
+OPTIONS = ("foot", "closed_loop")
 _HEADER = re.compile(r"^(?P<sensor>gyroscope|accelerometer|magnetometer)\s+(?P<axis>[xyz])\s*\((?P<unit>[^)]*)\)$", re.I)
 _UNIT_SCALE = {
     "gyroscope": {"deg/s": np.pi / 180.0, "rad/s": 1.0},
@@ -53,7 +54,8 @@ def _columns(header: list[str], what: str) -> dict[str, tuple[list[int], float]]
     return out
 
 
-def import_source(src: Path, dest: Path, *, rate_hz: float | None = None, force: bool = False) -> list[Path]:
+def import_source(src: Path, dest: Path, *, rate_hz: float | None = None, force: bool = False, foot: str | None = None,
+                  closed_loop: bool = False) -> list[Path]:
     what = src.name
     if src.is_dir():
         raise InputError(f"{src}: expected an x-io Gait-Tracking CSV file, found a folder")
@@ -76,7 +78,10 @@ def import_source(src: Path, dest: Path, *, rate_hz: float | None = None, force:
     t_s, stacked = steady_clock(t_s, np.hstack([signals[s] for s in order]), what)
     signals = {s: stacked[:, 3 * k:3 * k + 3] for k, s in enumerate(order)}
     imu = imu_frame(t_s, signals["accelerometer"], signals.get("gyroscope"), signals.get("magnetometer"))
-    meta = {"recording": {"id": safe_id(src.stem), "placement": "foot_right", "placement_assumed": True, "source": "xio"}}
-    reference = {"summary": {"loop_closure": True, "final_displacement_m": 0.0, "distance_m": LOOP_DISTANCE_M,
-                             "distance_approximate": True}}
-    return write_recordings([Recording(meta=meta, imu=imu, reference=reference)], dest, force=force)
+    if foot is not None and foot not in ("left", "right"):
+        raise InputError(f"import xio: expected --foot left or right, found {foot!r}")
+    recording = {"id": safe_id(src.stem), "placement": f"foot_{foot or 'right'}", "source": "xio"}
+    if foot is None:
+        recording["placement_assumed"] = True
+    return write_recordings([Recording(meta={"recording": recording}, imu=imu, reference=closed_loop_reference(closed_loop))],
+                            dest, force=force)
