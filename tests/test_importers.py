@@ -249,8 +249,46 @@ def test_xio_repaired_clock_units_and_loop(tmp_path):
     np.testing.assert_allclose(rec.imu[["acc_x_mps2", "acc_y_mps2", "acc_z_mps2"]].iloc[0],
                                np.array([-0.4937814, 0.2420433, 0.8312204]) * GRAVITY_MPS2, rtol=1e-7)
     np.testing.assert_allclose(rec.imu["gyr_x_radps"].iloc[0], np.radians(-0.1428319), rtol=1e-7)
-    summary = rec.reference["summary"]
-    assert summary["loop_closure"] is True and summary["distance_m"] == 25.0 and summary["distance_approximate"] is True
+    assert not rec.reference  # the CSV carries no truth: nothing is assumed
+    rec = load_recording(_import("xio", XIO, tmp_path / "loop", closed_loop=True, foot="left")[0][0])
+    assert rec.reference["summary"] == {"loop_closure": True, "final_displacement_m": 0.0}
+    assert rec.placement == "foot_left" and "placement_assumed" not in rec.meta["recording"]
+
+
+@pytest.mark.real_data("openshoe_foot_imu_figure8")
+def test_openshoe_units_rate_foot_and_declared_loop(tmp_path):
+    src = real_dataset("openshoe_foot_imu_figure8") / "data_inert_left.txt"
+    rec = load_recording(_import("openshoe", src, tmp_path / "a", closed_loop=True)[0][0])
+    assert rec.id == "data_inert_left" and rec.placement == "foot_left" and len(rec.imu) == 51055
+    assert abs(rec.sample_rate_hz - 820.0) < 0.1 and 9.0 < _median_acc(rec) < 14.0
+    assert rec.reference["summary"]["loop_closure"] is True
+    renamed = tmp_path / "walk.txt"
+    renamed.write_bytes(src.read_bytes())
+    with pytest.raises(InputError, match="--foot"):
+        import_recordings("openshoe", renamed, tmp_path / "b")
+    rec = load_recording(import_recordings("openshoe", renamed, tmp_path / "b", foot="right", rate_hz=410.0)[0])
+    assert rec.placement == "foot_right" and abs(rec.sample_rate_hz - 410.0) < 0.1 and not rec.reference
+    deg = tmp_path / "data_inert_right.txt"
+    a = np.loadtxt(src, delimiter=",")
+    np.savetxt(deg, np.column_stack([a[:, :3], np.degrees(a[:, 3:])]), delimiter=",")
+    with pytest.raises(InputError, match="deg/s"):
+        import_recordings("openshoe", deg, tmp_path / "c")
+    with pytest.raises(InputError, match="--closed-loop"):
+        import_recordings("gaitmap", deg, tmp_path / "d", closed_loop=True)
+
+
+@pytest.mark.real_data("gaitmap_foot_imu_mocap")
+def test_gaitmap_any_file_name_and_layout(tmp_path):
+    src = tmp_path / "src"
+    src.mkdir()
+    (src / "imu_two_feet_walk.csv").write_bytes((GAITMAP / "imu_sample.csv").read_bytes())
+    (src / "stride_borders_two_feet_walk.csv").write_bytes((GAITMAP / "stride_borders_sample.csv").read_bytes())
+    (src / "notes.csv").write_text("a,b\n1,2\n")
+    paths, _ = _import("gaitmap", src, tmp_path / "out", rate_hz=102.4)
+    assert [p.name for p in paths] == ["imu_two_feet_walk"]
+    rec = load_recording(paths[0])
+    assert abs(rec.sample_rate_hz - 102.4) < 1e-3 and len(rec.reference["strides"]) == 58
+    assert rec.reference["strides"]["length_m"].isna().all()
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -505,7 +543,7 @@ def test_cli_prints_one_path_per_recording(tmp_path, capsys):
         warnings.simplefilter("error")  # no warning when the rate is given
         rc, out, err = _cli(["import", "gaitmap", GAITMAP, tmp_path, "--rate-hz", "204.8"], capsys)
     assert rc == 0
-    assert out.split() == [str(tmp_path / n) for n in ("walk_2x20m", "stairs_up", "stairs_down")]
+    assert out.split() == [str(tmp_path / n) for n in ("walk_2x20m", "stairs_down", "stairs_up")]  # file-name order
 
 
 # ---------------------------------------------------------------------------------------------------------------

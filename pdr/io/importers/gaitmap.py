@@ -1,24 +1,28 @@
-"""gaitmap example data (MaD-Lab, FAU): two foot-mounted IMUs with motion-capture stride reference.
+"""gaitmap IMU CSVs (MaD-Lab, FAU; the layout of gaitmap's ``example_data``): two foot-mounted IMUs, with the
+motion-capture stride reference when it lies beside the file.
 
-Source: a folder with the gaitmap example CSVs (see ``datasets/gaitmap_foot_imu_mocap/README.md``), or one of its IMU files.
-
-- ``imu_sample.csv`` -> recording ``walk_2x20m``. Two header rows (sensor, axis), then a **sample index** only:
-  the rate comes from ``--rate-hz`` (204.8 Hz for this file; when not given, ``DEFAULT_RATE_HZ`` is used with a warning).
-- ``imu_sample_healthy_stair_up.csv`` / ``..._stair_down.csv`` -> ``stairs_up`` / ``stairs_down``. Their first column is
-  time in seconds, which is used as is (``--rate-hz`` is not needed; a different one is ignored with a warning).
+Source: a folder (every ``*.csv`` in gaitmap's IMU layout in it is a recording) or one such file. The layout: two
+header rows (sensor ``left_sensor`` / ``right_sensor`` x axis ``acc_x..gyr_z``), acc in m/s², gyr in deg/s, the first
+column either a **sample index** (consecutive integers: the rate comes from ``--rate-hz``; without it
+``DEFAULT_RATE_HZ`` is used with a warning) or time in seconds (used as is; a different ``--rate-hz`` is ignored with a
+warning). The recording id is the file name without ``.csv``, except the three example files, which keep their
+descriptive ids: ``imu_sample.csv`` -> ``walk_2x20m``, ``imu_sample_healthy_stair_up.csv`` / ``..._down.csv`` ->
+``stairs_up`` / ``stairs_down`` (``activity`` in the reference).
 
 Each recording: ``imu.csv`` = the left foot (placement ``foot_left``) and ``imu_foot_right.csv``; acc m/s² as given, gyr
 deg/s -> rad/s; gaitmap's foot "sensor frame" (z up at rest, x roughly along the foot) is kept.
 
-Reference of the walk, from ``stride_events_sample.csv`` (IMU sample indices) and ``position_sample.csv`` (heel marker
-per stride, metres, relative to the stride start):
+Reference of ``imu_<name>.csv``, from ``stride_events_<name>.csv`` (IMU sample indices) and ``position_<name>.csv`` (heel
+marker per stride, metres, relative to the stride start) beside it:
 
 - ``strides.csv``: ``t_start_s, t_end_s`` (min_vel to the next min_vel, i.e. mid-stance to mid-stance), ``foot``,
   ``length_m`` (horizontal norm of the stride's last position row), plus ``ic_s``, ``tc_s``;
 - ``steps.csv``: ``t_s, foot`` of every initial contact (each stride's ``ic`` and ``pre_ic``, without duplicates);
 - ``summary.toml``: ``n_strides``, ``n_steps``, ``stride_length_sum_left_m`` / ``_right_m``, ``distance_m`` (the mean of
   the two feet's stride-length sums: the walked distance covered by the reference strides), ``activity``.
-The stair recordings have only ``summary.toml`` with ``activity = "stairs_up"`` / ``"stairs_down"``.
+Without stride events, ``stride_borders_<name>.csv`` (``s_id, foot, start, end``) gives ``strides.csv`` with
+``t_start_s, t_end_s, foot`` and unknown (NaN) ``length_m``. A recording without either has only its ``activity``,
+when the example file names it.
 """
 
 from __future__ import annotations
@@ -32,14 +36,13 @@ import pandas as pd
 
 from pdr.errors import InputError
 from pdr.io.importers._common import (
-    imu_frame, numeric_array, read_table, require_finite, write_recordings,
+    imu_frame, numeric_array, read_table, require_finite, safe_id, write_recordings,
 )
 from pdr.io.recording import Recording
 
 DEFAULT_RATE_HZ = 204.8
-WALK_FILE = "imu_sample.csv"
-RECORDINGS = {  # file -> (recording name, activity label)
-    WALK_FILE: ("walk_2x20m", "level_walk"),
+RECORDINGS = {  # the example files -> (recording name, activity label)
+    "imu_sample.csv": ("walk_2x20m", "level_walk"),
     "imu_sample_healthy_stair_up.csv": ("stairs_up", "stairs_up"),
     "imu_sample_healthy_stair_down.csv": ("stairs_down", "stairs_down"),
 }
@@ -71,37 +74,53 @@ def _feet_imus(t_s: np.ndarray, feet: dict[str, np.ndarray]) -> dict[str, pd.Dat
     return {foot: imu_frame(t_s, a[:, :3], np.radians(a[:, 3:6])) for foot, a in feet.items()}
 
 
-def _walk_reference(folder: Path, rate_hz: float) -> dict[str, Any]:
-    events_path, pos_path = folder / "stride_events_sample.csv", folder / "position_sample.csv"
+def _borders_reference(path: Path, rate_hz: float, activity: dict[str, Any]) -> dict[str, Any]:
+    b = read_table(path, path.name)
+    need = ("foot", "start", "end")
+    if any(c not in b.columns for c in need):
+        raise InputError(f"{path.name}: expected columns {', '.join(need)}, found {', '.join(map(str, b.columns))}")
+    idx = numeric_array(b[["start", "end"]], path.name)
+    require_finite(idx, path.name, "start, end")
+    foot = b["foot"].astype(str).str.strip().str.lower()
+    if not foot.isin(("left", "right")).all():
+        raise InputError(f"{path.name}: expected foot 'left' or 'right', found {sorted(set(foot) - {'left', 'right'})}")
+    strides = pd.DataFrame({"t_start_s": idx[:, 0] / rate_hz, "t_end_s": idx[:, 1] / rate_hz, "foot": foot.to_numpy(),
+                            "length_m": np.nan}).sort_values(["t_start_s", "foot"], kind="stable").reset_index(drop=True)
+    return {"strides": strides, "summary": {**activity, "n_strides": int(len(strides))}}
+
+
+def _walk_reference(folder: Path, suffix: str, rate_hz: float, activity: dict[str, Any]) -> dict[str, Any]:
+    events_path, pos_path = folder / f"stride_events_{suffix}.csv", folder / f"position_{suffix}.csv"
     if not events_path.is_file():
-        warnings.warn(f"{folder.name}: no stride_events_sample.csv; walk_2x20m has no stride reference", stacklevel=3)
-        return {"summary": {"activity": "level_walk"}}
-    ev = read_table(events_path, "stride_events_sample.csv")
+        borders = folder / f"stride_borders_{suffix}.csv"
+        return _borders_reference(borders, rate_hz, activity) if borders.is_file() else {"summary": activity} \
+            if activity else {}
+    ev = read_table(events_path, events_path.name)
     missing = [c for c in EVENT_COLUMNS if c not in ev.columns]
     if missing:
-        raise InputError(f"stride_events_sample.csv: expected columns {', '.join(EVENT_COLUMNS)}, found {', '.join(map(str, ev.columns))}")
+        raise InputError(f"{events_path.name}: expected columns {', '.join(EVENT_COLUMNS)}, found {', '.join(map(str, ev.columns))}")
     num_cols = [c for c in EVENT_COLUMNS if c != "foot"]
-    idx = numeric_array(ev[num_cols], "stride_events_sample.csv")
-    require_finite(idx, "stride_events_sample.csv", ", ".join(num_cols))
+    idx = numeric_array(ev[num_cols], events_path.name)
+    require_finite(idx, events_path.name, ", ".join(num_cols))
     ev = pd.DataFrame(idx, columns=num_cols).assign(foot=ev["foot"].astype(str).str.strip().str.lower())
     if not ev["foot"].isin(("left", "right")).all():
-        raise InputError("stride_events_sample.csv: expected foot 'left' or 'right', found "
+        raise InputError(f"{events_path.name}: expected foot 'left' or 'right', found "
                          f"{sorted(set(ev['foot']) - {'left', 'right'})}")
     lengths = np.full(len(ev), np.nan)
     if pos_path.is_file():
-        pos = read_table(pos_path, "position_sample.csv")
+        pos = read_table(pos_path, pos_path.name)
         pos = pos.rename(columns={pos.columns[0]: "sensor"})
         need = ("sensor", "s_id", "sample", "pos_x", "pos_y")
         if any(c not in pos.columns for c in need):
-            raise InputError(f"position_sample.csv: expected columns {', '.join(need)}, found {', '.join(map(str, pos.columns))}")
-        xy = numeric_array(pos[["s_id", "sample", "pos_x", "pos_y"]], "position_sample.csv")
+            raise InputError(f"{pos_path.name}: expected columns {', '.join(need)}, found {', '.join(map(str, pos.columns))}")
+        xy = numeric_array(pos[["s_id", "sample", "pos_x", "pos_y"]], pos_path.name)
         pos = pd.DataFrame(xy, columns=["s_id", "sample", "pos_x", "pos_y"]).assign(
             foot=pos["sensor"].astype(str).map(SENSORS))
         last = pos.sort_values(["foot", "s_id", "sample"], kind="stable").groupby(["foot", "s_id"]).tail(1)
         norm = dict(zip(zip(last["foot"], last["s_id"]), np.hypot(last["pos_x"], last["pos_y"])))
         lengths = np.array([norm.get((f, s), np.nan) for f, s in zip(ev["foot"], ev["s_id"])])
     else:
-        warnings.warn(f"{folder.name}: no position_sample.csv; stride lengths are unknown (NaN)", stacklevel=3)
+        warnings.warn(f"{folder.name}: no {pos_path.name}; stride lengths are unknown (NaN)", stacklevel=3)
     strides = pd.DataFrame({
         "t_start_s": ev["start"] / rate_hz, "t_end_s": ev["end"] / rate_hz, "foot": ev["foot"], "length_m": lengths,
         "ic_s": ev["ic"] / rate_hz, "tc_s": ev["tc"] / rate_hz, "s_id": ev["s_id"].astype(int),
@@ -111,7 +130,7 @@ def _walk_reference(folder: Path, rate_hz: float) -> dict[str, Any]:
     steps = pd.DataFrame({"t_s": ics["ic"].to_numpy() / rate_hz, "foot": ics["foot"].to_numpy()})
     sums = {foot: float(np.nansum(strides.loc[strides["foot"] == foot, "length_m"])) for foot in ("left", "right")}
     summary = {
-        "activity": "level_walk",
+        **activity,
         "n_strides": int(len(strides)),
         "n_steps": int(len(steps)),
         "stride_length_sum_left_m": sums["left"],
@@ -123,35 +142,48 @@ def _walk_reference(folder: Path, rate_hz: float) -> dict[str, Any]:
 
 
 def _recording(path: Path, rate_hz: float | None) -> Recording:
-    name, activity = RECORDINGS[path.name]
+    name, label = RECORDINGS.get(path.name, (safe_id(path.stem), None))
+    activity = {"activity": label} if label else {}
     first, feet = _two_header_table(path, path.name)
-    if path.name == WALK_FILE:
+    if (np.diff(first) <= 0).any():
+        raise InputError(f"{path.name}: expected an increasing sample index or time in the first column, found it out "
+                         "of order")
+    if np.allclose(np.diff(first), 1.0) and np.allclose(first, np.round(first)):  # a sample index
         if rate_hz is None:
             warnings.warn(f"{path.name}: carries only a sample index and --rate-hz was not given; "
                           f"using {DEFAULT_RATE_HZ} Hz (the rate of the gaitmap example data)", stacklevel=3)
             rate_hz = DEFAULT_RATE_HZ
-        if (np.diff(first) <= 0).any():
-            raise InputError(f"{path.name}: expected an increasing sample index in the first column, found it out of order")
         t_s = (first - first[0]) / rate_hz
-        reference = _walk_reference(path.parent, rate_hz)
     else:
         t_s = first
         file_rate = 1.0 / float(np.median(np.diff(t_s))) if len(t_s) > 1 else float("nan")
         if rate_hz is not None and abs(file_rate - rate_hz) > 0.01 * rate_hz:
-            warnings.warn(f"{path.name}: its time column gives {file_rate:.1f} Hz; --rate-hz {rate_hz:g} is ignored", stacklevel=3)
-        reference = {"summary": {"activity": activity}}
+            warnings.warn(f"{path.name}: its time column gives {file_rate:.1f} Hz; --rate-hz {rate_hz:g} is ignored",
+                          stacklevel=3)
+        rate_hz = file_rate
+    suffix = path.stem[len("imu_"):] if path.stem.startswith("imu_") else path.stem
+    reference = _walk_reference(path.parent, suffix, rate_hz, activity)
     imus = _feet_imus(t_s, feet)
     meta = {"recording": {"id": name, "placement": "foot_left", "source": "gaitmap"}}
     return Recording(meta=meta, imu=imus["left"], extra_imus={"foot_right": imus["right"]}, reference=reference)
 
 
+def _is_imu_layout(path: Path) -> bool:
+    """The first two lines hold gaitmap's sensor and axis header rows."""
+    try:
+        with open(path, encoding="utf-8", errors="replace") as f:
+            head = f.readline() + f.readline()
+    except OSError:
+        return False
+    return "left_sensor" in head and "right_sensor" in head and "acc_x" in head
+
+
 def import_source(src: Path, dest: Path, *, rate_hz: float | None = None, force: bool = False) -> list[Path]:
     if src.is_file():
-        if src.name not in RECORDINGS:
-            raise InputError(f"{src}: expected a gaitmap example folder or one of {', '.join(RECORDINGS)}, found {src.name}")
         files = [src]
     else:
-        files = [src / n for n in RECORDINGS if (src / n).is_file()]
+        files = [p for p in sorted(src.glob("*.csv")) if _is_imu_layout(p)]
         if not files:
-            raise InputError(f"{src}: expected a folder with gaitmap example CSVs ({', '.join(RECORDINGS)}), found none of them")
+            raise InputError(f"{src}: expected a folder with gaitmap IMU CSVs (two header rows left_sensor/right_sensor "
+                             "x acc_x..gyr_z), found none")
     return write_recordings([_recording(p, rate_hz) for p in files], dest, force=force)
