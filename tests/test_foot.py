@@ -466,3 +466,89 @@ def test_xio_loop_closes(tmp_path):
     ins = ZuptInsStride().estimate(load_recording(path).imu)
     assert 20.0 < ins.strides_["length_m"].sum() < 27.0
     assert np.hypot(*ins.final_position_m_[:2]) < 0.1
+
+
+def _closed_loops(tmp_path) -> dict[str, Path]:
+    """The x-io and OpenShoe closed walks imported with ``--closed-loop`` (recording folders in tmp_path)."""
+    from pdr.io.importers import import_recordings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the x-io clock repair
+        xio = import_recordings("xio", _dataset("xio_foot_imu_loop_walk") / "short_walk.csv", tmp_path / "recs",
+                                closed_loop=True)[0]
+        shoe = import_recordings("openshoe", _dataset("openshoe_foot_imu_figure8") / "data_inert_left.txt",
+                                 tmp_path / "recs", closed_loop=True)[0]
+    return {"xio": xio, "openshoe": shoe}
+
+
+def test_pdr_run_keeps_the_ins_path_on_real_closed_loops(tmp_path):
+    """pdr run ends no further from the start than the foot INS alone (+1% of the path); evaluate reports it; the
+    quantised OpenShoe sensor gives no saturation warning and no dropped stride."""
+    from pdr.eval.evaluate import evaluate_run
+    from pdr.io.recording import load_recording
+    from pdr.pipelines.run import run_recording
+
+    for name, rec_dir in _closed_loops(tmp_path).items():
+        rec = load_recording(rec_dir)
+        imu = next(iter(rec.imus_by_placement().values()))
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            ins = ZuptInsStride(foot=rec.placement[len("foot_"):]).estimate(imu)
+            summary = run_recording(rec_dir, tmp_path / f"out_{name}")
+        path_m = float(ins.strides_["length_m"].sum())
+        ins_closure = float(np.hypot(*ins.final_position_m_[:2]))
+        m = evaluate_run(tmp_path / f"out_{name}", rec_dir)
+        assert m["loop_closure_m"] <= ins_closure + 0.01 * path_m, (name, m, ins_closure)
+        assert m["loop_closure_pct"] < 1.0 and abs(m["distance_m"] - path_m) < 0.02 * path_m
+        assert summary["n_strides"] == len(ins.strides_)
+        assert not [w for w in caught if "saturat" in str(w.message) or "dropped" in str(w.message)], name
+
+
+def _resampled(imu: pd.DataFrame, rate_hz: float) -> pd.DataFrame:
+    """``imu`` at ``rate_hz`` as a sensor at that rate would deliver it: low-passed below the new Nyquist frequency
+    (8th-order Butterworth at 0.4 x rate, zero phase) when the rate falls, then linearly interpolated."""
+    from scipy.signal import butter, sosfiltfilt
+
+    t = imu["t_s"].to_numpy()
+    t_new = np.arange(t[0], t[-1], 1.0 / rate_hz)
+    cols = [c for c in imu.columns if c != "t_s"]
+    x = imu[cols].to_numpy(float)
+    native = 1.0 / float(np.median(np.diff(t)))
+    if rate_hz < native:
+        x = sosfiltfilt(butter(8, 0.4 * rate_hz, fs=native, output="sos"), x, axis=0)
+    return pd.DataFrame({"t_s": t_new, **{c: np.interp(t_new, t, x[:, j]) for j, c in enumerate(cols)}})
+
+
+def _f1(t_ref: np.ndarray, t_est: np.ndarray, tol_s: float) -> float:
+    from pdr.eval.metrics import event_f1
+
+    return float(event_f1(np.asarray(t_ref), np.asarray(t_est), tol_s)["f1"])
+
+
+@pytest.mark.parametrize("rate_hz", [100.0, 102.4, 200.0])
+def test_strides_and_loop_closure_do_not_depend_on_the_sampling_rate(tmp_path, rate_hz):
+    from pdr.io.recording import load_recording
+
+    for name, rec_dir in _closed_loops(tmp_path).items():
+        rec = load_recording(rec_dir)
+        imu = next(iter(rec.imus_by_placement().values()))
+        native = ZuptInsStride().estimate(imu)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            other = ZuptInsStride().estimate(_resampled(imu, rate_hz))
+        assert _f1(native.strides_["t_end_s"], other.strides_["t_end_s"], 0.05) >= 0.95, name
+        path_m = float(native.strides_["length_m"].sum())
+        closure = [float(np.hypot(*r.final_position_m_[:2])) for r in (native, other)]
+        assert abs(closure[1] - closure[0]) <= 0.003 * path_m, (name, closure)
+
+
+@pytest.mark.parametrize("rate_hz", [102.4])
+def test_gaitmap_strides_at_half_rate(gaitmap_walk, rate_hz):
+    rec = gaitmap_walk["walk_2x20m"]
+    half = Recording(meta=rec.meta, imu=_resampled(rec.imu, rate_hz),
+                     extra_imus={"foot_right": _resampled(rec.extra_imus["foot_right"], rate_hz)})
+    native, out = foot_strides(rec, {}), foot_strides(half, {})
+    assert _mocap_mae(out, rec.reference["strides"]) < 0.03
+    for foot in ("left", "right"):
+        a, b = native[native["foot"] == foot], out[out["foot"] == foot]
+        assert _f1(a["t_end_s"], b["t_end_s"], 0.05) >= 0.95

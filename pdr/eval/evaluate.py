@@ -177,6 +177,20 @@ def _position_metrics(traj: pd.DataFrame, ref: dict[str, Any], gnss_used: bool, 
     return m
 
 
+def _loop_metrics(traj: pd.DataFrame, ref: dict[str, Any], distance_m: float) -> dict[str, Any]:
+    """Loop closure when the reference says the walk is closed (``summary.toml`` ``loop_closure = true``): the final
+    displacement from the start (m) and as % of the estimated path (a closed walk's truth is 0 m whatever its length,
+    so no reference distance is needed)."""
+    if ref.get("summary", {}).get("loop_closure") is not True or len(traj) < 2:
+        return {}
+    xy = traj[["e_m", "n_m"]].to_numpy(float)
+    closure = float(np.hypot(*(xy[-1] - xy[0])))
+    m = {"loop_closure_m": closure}
+    if distance_m > 0:
+        m["loop_closure_pct"] = 100.0 * closure / distance_m
+    return m
+
+
 def evaluate_run(out: Path, rec: Path, *, step_tolerance_s: float = STEP_F1_TOLERANCE_S) -> dict[str, Any]:
     """Metrics of the ``pdr run`` output folder ``out`` against ``rec/reference/`` (see the module docstring).
 
@@ -184,7 +198,8 @@ def evaluate_run(out: Path, rec: Path, *, step_tolerance_s: float = STEP_F1_TOLE
     minus reference), ``step_count_error_pct`` (absolute, % of reference), ``step_f1`` / ``step_precision`` /
     ``step_recall`` with ``step_f1_tolerance_s``, ``step_length_mae_m``, ``stride_length_mae_m``, ``distance_m``,
     ``distance_ref_m``, ``distance_error_pct`` (signed), ``ate_rmse_m`` with ``alignment``, ``final_error_m`` /
-    ``final_error_pct`` (% of the reference distance), ``landmark_error_mean_m`` / ``_max_m`` / ``_mean_pct`` / ``_max_pct``.
+    ``final_error_pct`` (% of the reference distance), ``landmark_error_mean_m`` / ``_max_m`` / ``_mean_pct`` / ``_max_pct``,
+    ``loop_closure_m`` / ``loop_closure_pct`` (a closed walk: :func:`_loop_metrics`).
     """
     out, rec = Path(out), Path(rec)
     if not out.is_dir():
@@ -217,4 +232,5 @@ def evaluate_run(out: Path, rec: Path, *, step_tolerance_s: float = STEP_F1_TOLE
         distance_ref = None
     gnss_used = int(summary.get("gnss", {}).get("used", 0) or 0) > 0
     metrics.update(_position_metrics(traj, ref, gnss_used, distance_ref))
+    metrics.update(_loop_metrics(traj, ref, distance_m))
     return {k: float(f"{v:.{SIGNIFICANT_DIGITS}g}") if isinstance(v, float) else v for k, v in metrics.items()}
