@@ -23,6 +23,7 @@ from pdr.io.importers import import_recordings
 from pdr.io.recording import Recording, load_recording
 from pdr.eval.evaluate import _match_intervals
 from pdr.pipelines.foot import foot_strides
+from pdr.pipelines.run import run_recording
 from pdr.sim import simulate
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -74,6 +75,75 @@ def simulated_errors(seed: int, methods: dict[str, dict]) -> pd.DataFrame:
     return pd.concat(rows, ignore_index=True)
 
 
+GRID = {  # candidate defaults of the leave-one-recording-out choice: (zero_velocity, zupt_ins) parameters
+    f"window {w:g} s, gyro noise {g:g}, margin {m:g} s": ({"window_s": w}, {"gyr_noise_radps_rthz": g, "zupt_margin_s": m})
+    for w in (0.05, 0.1) for g in (0.03, 0.05, 0.1) for m in (0.025, 0.05)
+}
+DEFAULT = "window 0.1 s, gyro noise 0.05, margin 0.05 s"
+
+
+def slow_walk() -> Recording:
+    """30 s of simulated walking at 0.7 m/s with both feet at 200 Hz (``pdr.sim``, seed 1), standing 2 s before and
+    after: the slow gait where the heel rise is slow (truth: the simulator's heel strides)."""
+    feet = [{"placement": f"foot_{s}", "rate_hz": 200.0, "magnetometer": False, "barometer": False}
+            for s in ("left", "right")]
+    return simulate({"route": {"waypoints_m": [[0.0, 0.0], [100.0, 0.0]], "loop": False},
+                     "segment": [{"duration_s": 2.0, "speed_mps": 0.0}, {"duration_s": 30.0, "speed_mps": 0.7},
+                                 {"duration_s": 2.0, "speed_mps": 0.0}],
+                     "imu": feet, "gnss": {"enabled": False}}, seed=1)
+
+
+def recording_scores(recs: dict[str, Recording], reference: pd.DataFrame) -> pd.DataFrame:
+    """Score of every GRID candidate on every recording: loop closure (% of the path) of the closed walks, stride
+    length MAE (cm) on the gaitmap mocap strides and on the simulated slow walk (matched by shared time, as
+    ``pdr evaluate``); one row per candidate, one column per recording."""
+    rows = {}
+    for name, (zv, ins) in GRID.items():
+        row = {}
+        for rec_name, rec in recs.items():
+            out = foot_strides(rec, {"foot": {"zero_velocity": zv, "zupt_ins": ins}})
+            if rec_name == "gaitmap":
+                row[rec_name] = 100.0 * float(np.mean(np.abs(mocap_errors(out, reference))))
+            elif rec_name == "simulated slow walk":
+                ref = rec.reference["strides"]
+                err = []
+                for foot in ("left", "right"):
+                    r, e = ref[ref["foot"] == foot], out[out["foot"] == foot]
+                    i_ref, i_est = _match_intervals(r, e, 0.5)
+                    err.extend(e["length_m"].to_numpy()[i_est] - r["length_m"].to_numpy()[i_ref])
+                row[rec_name] = 100.0 * float(np.mean(np.abs(err)))
+            else:
+                imu = next(iter(rec.imus_by_placement().values()))
+                r = ZuptInsStride(zero_velocity=zv, **ins).estimate(imu)
+                row[rec_name] = 100.0 * float(np.hypot(*r.final_position_m_[:2]) / r.strides_["length_m"].sum())
+        rows[name] = row
+    return pd.DataFrame(rows).T
+
+
+SCORE_TARGETS = {"gaitmap": 3.0, "x-io": 0.5, "OpenShoe": 0.5, "simulated slow walk": 3.0}  # issue targets: cm, %
+
+
+def leave_one_out(scores: pd.DataFrame) -> dict[str, tuple[str, float]]:
+    """Per recording, the candidate chosen without it (least mean of the other recordings' scores, each divided by
+    its target in SCORE_TARGETS so that % and cm weigh alike) and its score on the left-out recording."""
+    rel = scores / pd.Series(SCORE_TARGETS)[scores.columns]
+    out = {}
+    for rec in scores.columns:
+        choice = rel.drop(columns=rec).mean(axis=1).idxmin()
+        out[rec] = (choice, float(scores.loc[choice, rec]))
+    return out
+
+
+def run_closure(rec_dir: Path, out: Path) -> tuple[float, float]:
+    """Final displacement from the start (m) and the path length (m) of ``pdr run`` on a recording."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        run_recording(rec_dir, out, force=True)
+    traj = pd.read_csv(out / "trajectory.csv")
+    xy = traj[["e_m", "n_m"]].to_numpy()
+    return float(np.hypot(*(xy[-1] - xy[0]))), float(np.sum(np.hypot(*np.diff(xy, axis=0).T)))
+
+
 def _tile(imu: pd.DataFrame, n: int, rate_hz: float) -> pd.DataFrame:
     out = pd.concat([imu] * int(np.ceil(n / len(imu))), ignore_index=True).iloc[:n].copy()
     out["t_s"] = np.arange(n) / rate_hz
@@ -89,10 +159,29 @@ def run(quick: bool = False) -> list[dict]:
 
     with tempfile.TemporaryDirectory() as tmp:
         gm = _import("gaitmap", dataset_dir("gaitmap_foot_imu_mocap"), Path(tmp) / "gm", rate_hz=204.8)
-        xio = _import("xio", dataset_dir("xio_foot_imu_loop_walk") / "short_walk.csv", Path(tmp) / "xio")["short_walk"]
+        xio = _import("xio", dataset_dir("xio_foot_imu_loop_walk") / "short_walk.csv", Path(tmp) / "xio",
+                      closed_loop=True)["short_walk"]
+        shoe = _import("openshoe", dataset_dir("openshoe_foot_imu_figure8") / "data_inert_left.txt", Path(tmp) / "os",
+                       closed_loop=True)["data_inert_left"]
+        walk = gm["walk_2x20m"]
+        ref = walk.reference["strides"]
+        for name, rec in (("x-io loop walk", xio), ("OpenShoe two rectangular loops", shoe),
+                          ("gaitmap 2x20 m walk (out and back)", walk)):
+            closure, path = run_closure(rec.path, Path(tmp) / f"out_{rec.id}")
+            target = "<= 1.5" if rec is walk else f"<= {0.005 * path:.3f} (0.5%)"
+            row(f"{name}, pdr run (foot INS chain in the graph)", "final displacement from the start", round(closure, 3),
+                "m", target, XIO if rec is xio else ("INS alone: 1.37 m" if rec is walk else "INS alone"))
+            row(f"{name}, pdr run (foot INS chain in the graph)", "final displacement / path", round(100 * closure / path, 3),
+                "%", "" if rec is walk else "<= 0.5 (goal 0.3)", "x-io: 0.33% of 25 m" if rec is xio else "")
 
-    walk = gm["walk_2x20m"]
-    ref = walk.reference["strides"]
+    scores = recording_scores({"gaitmap": walk, "x-io": xio, "OpenShoe": shoe, "simulated slow walk": slow_walk()}, ref)
+    unit = {"gaitmap": "cm stride MAE", "x-io": "% loop closure", "OpenShoe": "% loop closure",
+            "simulated slow walk": "cm stride MAE"}
+    for rec_name, (choice, score) in leave_one_out(scores).items():
+        row(f"leave-one-recording-out over {len(GRID)} candidate defaults, left out: {rec_name}",
+            f"{unit[rec_name]}: left out ({choice}) / in-sample default",
+            f"{score:.3g} / {scores.loc[DEFAULT, rec_name]:.3g}", unit[rec_name].split()[0], "", "")
+
     case = f"gaitmap 2x20 m walk, {len(ref)} mocap strides"
     variants = [
         ("ZUPT INS, each foot alone (default)", {"method": "zupt_ins"}, "<= 0.03"),
@@ -125,7 +214,7 @@ def run(quick: bool = False) -> list[dict]:
         row(case, f"critical time {name}: median (IQR)", f"{q50:+.3f} ({q75 - q25:.3f})", "s", "",
             "FootStep-Tracker Algorithm 1; mocap IC/TC events")
 
-    ins = ZuptInsStride().estimate(xio.imu)
+    ins = ZuptInsStride().estimate(xio.imu)  # the INS alone
     dist = float(ins.strides_["length_m"].sum())
     err = float(np.hypot(*ins.final_position_m_[:2]))
     loop = f"x-io loop walk (about {LOOP_M:g} m), ZUPT INS"

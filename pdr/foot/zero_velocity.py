@@ -67,8 +67,10 @@ class ZeroVelocityDetection(Algorithm):
     eq. 21), ``T = mean_W(|w|^2) / gyr_thr^2 + mean_W(|f - g u|^2) / acc_thr^2`` with ``u`` the direction of the
     window's mean specific force; stance where ``T < 1``. ``g`` is the accelerometer's own reading of gravity (the
     median |f| over the 20% quietest samples), so a scale error of the accelerometer does not hide a stance.
-    The defaults (1.2 rad/s, 2.5 m/s^2, 50 ms) keep one stance per stride on level walking, stairs up and stairs
-    down (gaitmap example data) and the x-io loop walk. The gyroscope threshold scales with the swings' peak
+    The thresholds (1.2 rad/s, 2.5 m/s^2) keep one stance per stride on level walking, stairs up and stairs
+    down (gaitmap example data), the x-io and the OpenShoe loop walks; the 0.1 s window is the leave-one-recording-out
+    choice of ``benchmarks/bench_foot.py`` (see :class:`ZuptInsStride`). Windows are in seconds and thresholds in
+    physical units, so the strides do not depend on the sampling rate (tests: 100, 102.4 and 200 Hz copies). The gyroscope threshold scales with the swings' peak
     angular rate below that (``swing_fraction``; adaptive thresholds for varying gait speed as in Wagstaff,
     Peretroukhin & Kelly 2017, "Improving foot-mounted inertial navigation through real-time motion
     classification"): on simulated walks at 0.6-0.8 m/s the fixed threshold left up to 0.2 s of heel rise in every
@@ -80,7 +82,7 @@ class ZeroVelocityDetection(Algorithm):
     >>> det.stances_[["t_start_s", "t_end_s"]].head()       # doctest: +SKIP
     """
 
-    def __init__(self, *, window_s: float = 0.05, gyr_threshold_radps: float = 1.2, acc_threshold_mps2: float = 2.5,
+    def __init__(self, *, window_s: float = 0.1, gyr_threshold_radps: float = 1.2, acc_threshold_mps2: float = 2.5,
                  noise_factor: float = 5.0, swing_fraction: float = 0.14, swing_window: int = 5,
                  min_stance_s: float = 0.06, min_swing_s: float = 0.2) -> None:
         self.window_s = window_s

@@ -56,12 +56,16 @@ class ZuptInsStride(Algorithm):
     acc_noise_mps2_rthz : accelerometer white-noise density of the process model, m/s^2/sqrt(Hz).
     gyr_noise_radps_rthz : gyroscope white-noise density, rad/s/sqrt(Hz). It is set well above a MEMS gyro's own
         noise: it stands for every attitude error of the swing (scale, misalignment, vibration at heel strike) and
-        lets each stance's updates re-level the foot. The defaults (0.03, 0.05) come from a scan on the gaitmap
-        strides and the x-io loop; stride errors stay within 1.5-3.3 cm over a factor of 3 in either value.
+        lets each stance's updates re-level the foot. The gyroscope value, ``zupt_margin_s`` and the detector's
+        ``window_s`` are the candidate of ``benchmarks/bench_foot.py`` ``GRID`` with the least mean score over the
+        declared tuning set (gaitmap mocap strides, x-io and OpenShoe loop closure, a simulated slow walk), each
+        score divided by its target (3 cm, 0.5%); the benchmark prints each recording's score with the candidate
+        chosen without it.
     zupt_std_mps : standard deviation of the zero-velocity pseudo-measurement.
     zupt_rate_hz : zero-velocity updates are applied at this rate during stance (and at the first and last sample
         of every stance); between updates the error state is propagated in one exact step.
-    zupt_margin_s : the updates skip this much at both ends of every stance (where the foot may still roll).
+    zupt_margin_s : the updates skip this much at both ends of every stance (where the foot may still roll; chosen as
+        ``gyr_noise_radps_rthz``).
     initial_tilt_std_rad : standard deviation of roll and pitch after levelling on the first stance.
     gyr_bias_min_rest_s : when the recording starts with a rest at least this long, its mean angular rate is taken as
         the gyroscope bias (0, the default, disables it: on both real recordings of the benchmark removing the mean
@@ -113,7 +117,7 @@ class ZuptInsStride(Algorithm):
     """
 
     def __init__(self, *, foot: str = "left", acc_noise_mps2_rthz: float = 0.03, gyr_noise_radps_rthz: float = 0.05,
-                 zupt_std_mps: float = 0.02, zupt_rate_hz: float = 20.0, zupt_margin_s: float = 0.025,
+                 zupt_std_mps: float = 0.02, zupt_rate_hz: float = 20.0, zupt_margin_s: float = 0.05,
                  initial_tilt_std_rad: float = 0.02, gyr_bias_min_rest_s: float = 0.0, gravity_from_rest: bool = True,
                  min_length_std_m: float = 0.015,
                  zero_velocity: dict | None = None) -> None:
