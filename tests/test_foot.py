@@ -552,3 +552,23 @@ def test_gaitmap_strides_at_half_rate(gaitmap_walk, rate_hz):
     for foot in ("left", "right"):
         a, b = native[native["foot"] == foot], out[out["foot"] == foot]
         assert _f1(a["t_end_s"], b["t_end_s"], 0.05) >= 0.95
+
+
+def test_implausible_strides_are_named_and_dropped_never_an_error():
+    from pdr.pipelines.foot import foot_chain, implausible
+
+    t = np.arange(7, dtype=float) * 1.1
+    table = pd.DataFrame({"t_start_s": t[:-1], "t_end_s": t[1:], "foot": "left", "source": "foot_imu",
+                          "length_m": [1.3, 1.4, 10.5, 1.3, 1.35, 1.4], "length_std_m": 0.02,
+                          "t_swing_start_s": t[:-1] + 0.6, "t_swing_end_s": t[1:] - 0.05})
+    table.loc[4, "t_swing_start_s"] = table.loc[4, "t_start_s"] - 1.0  # the foot moved 1.45 s: a missed stance
+    reason = implausible(table)
+    assert "longer than a walking stride" in reason[2] and "missed stance" in reason[4]
+    assert (reason[[0, 1, 3, 5]] == "").all()
+    # a chain across a dropped stride: the stride after it starts from the last kept mid-stance, as a gap step
+    kept = table[reason == ""].assign(dx_m=1.3, dy_m=0.0, lateral_std_m=0.02, heading_rad=0.0, heading_change_rad=0.0,
+                                      heading_change_std_rad=0.01)
+    steps, other = foot_chain(kept)
+    assert len(steps) == 4 and len(other) == 0
+    assert steps["displacement_measured"].tolist() == [True, True, False, False]
+    np.testing.assert_allclose(steps["step_duration_s"], [1.1, 1.1, 2.2, 2.2])

@@ -87,8 +87,8 @@ class ZuptInsStride(Algorithm):
         of this foot), ``heading_rad`` (direction of the displacement, in the local frame) and
         ``heading_change_rad`` (since the previous stride of this foot; NaN for the first),
         ``t_swing_start_s, t_swing_end_s`` (the swing between the two stances); ``length_m`` is the
-        horizontal distance; ``length_std_m`` (along the stride), ``lateral_std_m`` (across it) and
-        ``heading_change_std_rad`` (the yaw error accrued over the stride) from the filter covariance.
+        horizontal distance; ``length_std_m`` (along the stride) and ``heading_change_std_rad`` (the yaw error accrued
+        over the stride) from the filter covariance; ``lateral_std_m`` (across the stride) equals ``length_std_m``.
     position_cov_m2_ : (K, 3, 3) position covariance at each mid-stance.
     final_position_m_ : position (3,) at the middle of the last stance.
     gyr_bias_radps_ : the gyroscope bias removed (zeros when none was estimated).
@@ -106,9 +106,11 @@ class ZuptInsStride(Algorithm):
     updates ``M`` is constant, so the nominal state and the transition matrix over the interval follow in closed form
     from cumulative integrals of ``R_gyr f`` (a handful of numpy operations per update instead of a loop over samples);
     the process noise uses the interval's mean specific force. Updates: ``v = 0`` during stance. Per stride (mid-stance
-    to mid-stance of the same foot) the displacement variance along the stride is ``u' (P_end - P_start) u``, across it
-    ``n' (P_end - P_start) n`` (position errors accumulate as independent increments), and the heading-change variance
-    is the increment of the yaw-error variance.
+    to mid-stance of the same foot) the displacement variance along the stride is ``u' (P_end - P_start) u`` (position
+    errors accumulate as independent increments), and the heading-change variance is the increment of the yaw-error
+    variance. Across the stride the increment of the absolute covariance is not the stride's own error: the yaw
+    uncertainty swings the whole path walked so far (the lateral variance grows with the distance from the start),
+    so the stride's error across is taken as the one along it and its direction error as the heading change's.
 
     Examples
     --------
@@ -260,12 +262,10 @@ class ZuptInsStride(Algorithm):
         dcov = cov[1:, :2, :2] - cov[:-1, :2, :2]
         var = np.einsum("ni,nij,nj->n", u, dcov, u)
         std = np.sqrt(np.maximum(var, 0.0) + self.min_length_std_m**2)
-        across = np.column_stack([-u[:, 1], u[:, 0]])
-        lateral_var = np.einsum("ni,nij,nj->n", across, dcov, across)
         heading = np.arctan2(d[:, 1], d[:, 0])
         return pd.DataFrame({
             "t_start_s": t_mid[:-1], "t_end_s": t_mid[1:], "foot": self.foot, "length_m": length,
-            "length_std_m": std, "lateral_std_m": np.sqrt(np.maximum(lateral_var, 0.0) + self.min_length_std_m**2),
+            "length_std_m": std, "lateral_std_m": std,
             "source": "foot_imu", "dx_m": d[:, 0], "dy_m": d[:, 1], "dz_m": d[:, 2],
             "heading_rad": heading, "heading_change_rad": np.r_[np.nan, np.diff(np.unwrap(heading))],
             "heading_change_std_rad": np.sqrt(np.maximum(np.diff(yaw_var), 0.0)),

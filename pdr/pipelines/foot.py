@@ -77,10 +77,9 @@ def implausible(strides: pd.DataFrame) -> np.ndarray:
 
 def _drop_implausible(strides: pd.DataFrame, foot: str) -> pd.DataFrame:
     reason = implausible(strides)
-    for (_, s), why in zip(strides.iterrows(), reason):
-        if why:
-            warnings.warn(f"{foot} foot IMU: the stride {s['t_start_s']:.2f}-{s['t_end_s']:.2f} s is dropped: {why}",
-                          stacklevel=3)
+    for i in np.flatnonzero(reason != ""):
+        t0, t1 = strides["t_start_s"].iloc[i], strides["t_end_s"].iloc[i]
+        warnings.warn(f"{foot} foot IMU: the stride {t0:.2f}-{t1:.2f} s is dropped: {reason[i]}", stacklevel=3)
     return strides[reason == ""]
 
 
