@@ -572,3 +572,12 @@ def test_implausible_strides_are_named_and_dropped_never_an_error():
     assert len(steps) == 4 and len(other) == 0
     assert steps["displacement_measured"].tolist() == [True, True, False, False]
     np.testing.assert_allclose(steps["step_duration_s"], [1.1, 1.1, 2.2, 2.2])
+
+
+def test_a_foot_imu_at_50_hz_warns_and_gives_no_strides():
+    imu, _ = simulate_foot_walk(n_strides=5, seed=3)
+    slow = imu.iloc[::4].reset_index(drop=True)  # 200 Hz -> 50 Hz
+    rec = Recording(meta={"recording": {"id": "slow", "placement": "foot_left"}}, imu=slow)
+    with pytest.warns(UserWarning, match="too slow"):
+        out = foot_strides(rec, {})
+    assert len(out) == 0 and "length_m" in out.columns

@@ -22,6 +22,7 @@ import pandas as pd
 from pdr.errors import InputError, check_keys
 from pdr.foot import DoubleFeetCalibration, FootStepTrackerStride, ZeroVelocityDetection, ZuptInsStride
 from pdr.foot._checks import check_pair, foot_imu_arrays
+from pdr.foot.footstep_tracker import empty_strides
 from pdr.io.recording import Recording
 from pdr.signals.faults import clipped_samples
 
@@ -35,6 +36,8 @@ INS_COLUMNS = ["dx_m", "dy_m", "lateral_std_m", "heading_rad", "heading_change_s
 # takes about 40% of a gait cycle (Perry & Burnfield 2010, Gait Analysis): a longer stride, or a swing longer than
 # MISSED_STANCE_SWING_RATIO times the foot's median swing (two swings and the stance between them), is not a stride.
 MAX_STRIDE_M = 2.5
+# A brisk walk's stance lasts about 0.1 s at mid-stance rest: the zero-velocity window (0.1 s) needs 8 samples in it
+MIN_RATE_HZ = 80.0
 MISSED_STANCE_SWING_RATIO = 2.0
 
 
@@ -105,6 +108,12 @@ def foot_strides(rec: Recording, config: dict) -> pd.DataFrame | None:
         check_pair(imus["left"], imus["right"])
     tables = []
     for foot, imu in sorted(imus.items()):
+        t = imu["t_s"].to_numpy(float)
+        rate = 1.0 / float(np.median(np.diff(t))) if len(t) > 1 else 0.0
+        if rate < MIN_RATE_HZ:
+            warnings.warn(f"{foot} foot IMU: sampled at {rate:.1f} Hz, too slow to find the stances (need at least "
+                          f"{MIN_RATE_HZ:g} Hz); no strides from this foot", stacklevel=2)
+            continue
         saturated = _saturation(imu, foot)
         stance = ZeroVelocityDetection.from_config(section.get("zero_velocity")).detect(imu)
         algo = METHODS[method].from_config(section.get(method), foot=foot)
@@ -118,6 +127,9 @@ def foot_strides(rec: Recording, config: dict) -> pd.DataFrame | None:
         strides = _drop_implausible(strides, foot)
         extra = {c: strides[c] if c in strides else np.nan for c in ("heading_change_rad", *INS_COLUMNS)}
         tables.append(strides[[*STRIDE_COLUMNS, "t_swing_start_s", "t_swing_end_s"]].assign(method=method, **extra))
+    if not tables:
+        return empty_strides([*STRIDE_COLUMNS, "t_swing_start_s", "t_swing_end_s", "method", "heading_change_rad",
+                              *INS_COLUMNS, "calibrated"])
     out = pd.concat(tables, ignore_index=True)
     out = out.sort_values("t_start_s", kind="stable").reset_index(drop=True)
     out["calibrated"] = False
