@@ -18,12 +18,12 @@ the intervals between consecutive contacts of a bout, the first contact's step (
 Sources of the trunk's motion, in this order:
 
 1. a trunk IMU (placement ``waist`` or ``trunk``): vertical and forward displacement by double integration of the
-   earth-frame acceleration within each step, drift removed between contacts: the acceleration's mean over the step
-   is removed (equal velocities at consecutive contacts), then the velocity's (equal heights), as the high-pass and
-   per-cycle detrending of Zijlstra & Hof (2003, Gait & Posture 18:1-10) for the trunk's vertical displacement. The
-   vertical is the accelerometer's 1 s mean direction (Moe-Nilssen 1998, Clin Biomech 13:320-327) turned by the
-   gyroscope's integrated rate about its own 1 s mean (small angles), so the trunk's pitch oscillation does not leak
-   gravity into the forward acceleration. The forward axis is fixed on the trunk: the principal direction of the
+   earth-frame acceleration (low-passed at ``KINEMATICS_CUTOFF_HZ``, zero lag) within each step, drift removed
+   between contacts: the acceleration's mean over the step is removed (equal velocities at consecutive contacts),
+   then the velocity's (equal heights), as the drift removal of Zijlstra & Hof (2003, Gait & Posture 18:1-10) for
+   the trunk's vertical displacement, done per step. The vertical is the accelerometer's mean direction over a
+   stride (Moe-Nilssen 1998, Clin Biomech 13:320-327) turned by the gyroscope's integrated rate about its own mean
+   (small angles), so the trunk's pitch oscillation does not leak gravity into the forward acceleration. The forward axis is fixed on the trunk: the principal direction of the
    step-averaged horizontal acceleration in the sensor frame (the lateral acceleration changes sign with the stance
    leg and averages out), signed so that the forward speed is lowest when the trunk is highest (inverted pendulum:
    kinetic and potential energy fluctuate in opposition, Cavagna et al. 1976). The average speed of each step is its
@@ -42,9 +42,10 @@ import warnings
 
 import numpy as np
 import pandas as pd
+from scipy.signal import butter, sosfiltfilt
 
 from pdr.constants import GRAVITY_MPS2
-from pdr.signals.attitude import GRAVITY_LOWPASS_S
+from pdr.errors import InputError
 from pdr.signals.resample import UniformImu, moving_average
 
 BOUT_COLUMNS = ("bout_id", "t_start_s", "t_end_s", "n_steps", "distance_m", "speed_mps", "cadence_spm", "step_length_m",
@@ -57,6 +58,8 @@ MIN_GNSS_RATE_HZ = 4.5  # the seed's DGPS ran at 5 Hz: about three fixes per ste
 MAX_GNSS_H_ACC_M = 0.05  # differential code and phase solutions agree within 5 cm (the seed, after Perrin 1999)
 GNSS_GRID_HZ = 50.0  # the fixes are interpolated onto this grid to be cut at the contacts
 MISSED_CONTACT_RATIO = 1.6  # a step interval this many times the bout's median spans a missed contact: no mechanics
+KINEMATICS_CUTOFF_HZ = 10.0  # five harmonics of a fast cadence (2 steps/s): the gait's trunk motion; noise above
+MEAN_TILT_WINDOW_S = 2.0  # a whole stride even at 1 step/s: the gait's oscillation averages out of the mean direction
 WAVEFORM_BINS = 32  # phase bins of the step-averaged horizontal acceleration (forward axis)
 
 
@@ -151,9 +154,10 @@ def step_energies(t_s: np.ndarray, z_m: np.ndarray, v_mps: np.ndarray, t_start_s
 
 
 def _up_in_sensor(u: UniformImu) -> np.ndarray:
-    """Unit up direction in the sensor frame per sample: the accelerometer's 1 s mean direction, turned by the
-    gyroscope's integrated rate about its 1 s mean (small-angle, ``u(t) = u_mean - theta x u_mean``)."""
-    win = int(round(GRAVITY_LOWPASS_S * u.rate_hz))
+    """Unit up direction in the sensor frame per sample: the accelerometer's mean direction over
+    ``MEAN_TILT_WINDOW_S``, turned by the gyroscope's integrated rate about its mean over the same window (small
+    angles: ``u(t) = u_mean - theta x u_mean``)."""
+    win = int(round(MEAN_TILT_WINDOW_S * u.rate_hz))
     up = moving_average(u.acc_mps2, win, axis=0)
     up /= np.maximum(np.linalg.norm(up, axis=1, keepdims=True), 1e-9)
     if u.gyr_radps is not None:
@@ -162,6 +166,14 @@ def _up_in_sensor(u: UniformImu) -> np.ndarray:
         up = up - np.cross(theta, up)
         up /= np.maximum(np.linalg.norm(up, axis=1, keepdims=True), 1e-9)
     return up
+
+
+def _lowpass(x: np.ndarray, rate_hz: float) -> np.ndarray:
+    """Zero-lag low-pass at ``KINEMATICS_CUTOFF_HZ`` (second-order Butterworth, forward and backward)."""
+    if rate_hz <= 2.5 * KINEMATICS_CUTOFF_HZ:
+        return x
+    sos = butter(2, KINEMATICS_CUTOFF_HZ, fs=rate_hz, output="sos")
+    return sosfiltfilt(sos, x, axis=0)
 
 
 def trunk_motion(u: UniformImu, t_start_s: np.ndarray, t_end_s: np.ndarray, speed_mps: np.ndarray
@@ -176,8 +188,8 @@ def trunk_motion(u: UniformImu, t_start_s: np.ndarray, t_end_s: np.ndarray, spee
     seg = _segments(u.t_s, t_start_s, t_end_s)
     seg = np.where(u.valid, seg, -1)
     bad = np.bincount(seg[seg >= 0], minlength=n) < 2
-    acc = u.acc_mps2
     up = _up_in_sensor(u)
+    acc = _lowpass(u.acc_mps2, u.rate_hz)
     a_up = np.einsum("ij,ij->i", acc, up)
     a_h = acc - a_up[:, None] * up
 
@@ -278,6 +290,11 @@ def walking_bouts(steps: pd.DataFrame, *, placement: str, imu: UniformImu | None
     ``placement`` is a trunk placement; else ``gnss`` (``t_s, e_m, n_m, u_m, h_acc_m``) when fast and precise enough.
     Warnings (once each): no source of trunk motion, GNSS not usable, no body mass, bouts of one step.
     """
+    missing = [c for c in ("t_s", "bout_id", "step_length_m") if c not in steps.columns]
+    if missing:
+        raise InputError(f"{what}: expected a steps table with t_s, bout_id, step_length_m, found {', '.join(map(str, steps.columns)) or 'no columns'}")
+    if mass_kg is not None and not (np.isfinite(mass_kg) and mass_kg > 0):
+        raise InputError(f"{what}: expected a body mass > 0 kg, found {mass_kg!r}")
     steps = steps.sort_values("t_s", kind="stable")
     t = steps["t_s"].to_numpy(float)
     bout = steps["bout_id"].to_numpy(int)
