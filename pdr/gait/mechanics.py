@@ -59,6 +59,7 @@ MAX_GNSS_H_ACC_M = 0.05  # differential code and phase solutions agree within 5 
 GNSS_GRID_HZ = 50.0  # the fixes are interpolated onto this grid to be cut at the contacts
 MISSED_CONTACT_RATIO = 1.6  # a step interval this many times the bout's median spans a missed contact: no mechanics
 KINEMATICS_CUTOFF_HZ = 10.0  # five harmonics of a fast cadence (2 steps/s): the gait's trunk motion; noise above
+DECIMATED_RATE_FACTOR = 5.0  # the low-passed signals are integrated at >= 5 x the cutoff (every k-th sample)
 MEAN_TILT_WINDOW_S = 2.0  # a whole stride even at 1 step/s: the gait's oscillation averages out of the mean direction
 WAVEFORM_BINS = 32  # phase bins of the step-averaged horizontal acceleration (forward axis)
 
@@ -153,17 +154,15 @@ def step_energies(t_s: np.ndarray, z_m: np.ndarray, v_mps: np.ndarray, t_start_s
 # ----------------------------------------------------------------------------------------------------------------
 
 
-def _up_in_sensor(u: UniformImu) -> np.ndarray:
+def _up_in_sensor(acc_mps2: np.ndarray, angle_rad: np.ndarray | None, rate_hz: float) -> np.ndarray:
     """Unit up direction in the sensor frame per sample: the accelerometer's mean direction over
-    ``MEAN_TILT_WINDOW_S``, turned by the gyroscope's integrated rate about its mean over the same window (small
-    angles: ``u(t) = u_mean - theta x u_mean``)."""
-    win = int(round(MEAN_TILT_WINDOW_S * u.rate_hz))
-    up = moving_average(u.acc_mps2, win, axis=0)
+    ``MEAN_TILT_WINDOW_S``, turned by the gyroscope's integrated rate ``angle_rad`` about its mean over the same window
+    (small angles: ``u(t) = u_mean - theta x u_mean``)."""
+    win = int(round(MEAN_TILT_WINDOW_S * rate_hz))
+    up = moving_average(acc_mps2, win, axis=0)
     up /= np.maximum(np.linalg.norm(up, axis=1, keepdims=True), 1e-9)
-    if u.gyr_radps is not None:
-        angle = np.cumsum(u.gyr_radps, axis=0) / u.rate_hz
-        theta = angle - moving_average(angle, win, axis=0)
-        up = up - np.cross(theta, up)
+    if angle_rad is not None:
+        up = up - np.cross(angle_rad - moving_average(angle_rad, win, axis=0), up)
         up /= np.maximum(np.linalg.norm(up, axis=1, keepdims=True), 1e-9)
     return up
 
@@ -178,18 +177,23 @@ def _lowpass(x: np.ndarray, rate_hz: float) -> np.ndarray:
 
 def trunk_motion(u: UniformImu, t_start_s: np.ndarray, t_end_s: np.ndarray, speed_mps: np.ndarray
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Trunk height (m) and forward speed (m/s) on the IMU grid, integrated within each step (module docstring).
+    """Trunk height (m) and forward speed (m/s), integrated within each step (module docstring), on the IMU grid
+    thinned to at least ``DECIMATED_RATE_FACTOR`` x the low-pass cutoff.
 
     ``speed_mps``: the average speed of each step (its length over its duration). Returns ``(t_s, z_m, v_mps)``
     restricted to the samples inside the steps (and valid).
     """
     n = len(t_start_s)
-    dt = 1.0 / u.rate_hz
-    seg = _segments(u.t_s, t_start_s, t_end_s)
-    seg = np.where(u.valid, seg, -1)
+    every = max(1, int(u.rate_hz // (DECIMATED_RATE_FACTOR * KINEMATICS_CUTOFF_HZ)))  # after the low-pass
+    rate = u.rate_hz / every
+    dt = 1.0 / rate
+    t_s = u.t_s[::every]
+    seg = _segments(t_s, t_start_s, t_end_s)
+    seg = np.where(u.valid[::every], seg, -1)
     bad = np.bincount(seg[seg >= 0], minlength=n) < 2
-    up = _up_in_sensor(u)
-    acc = _lowpass(u.acc_mps2, u.rate_hz)
+    acc = _lowpass(u.acc_mps2, u.rate_hz)[::every]
+    angle = None if u.gyr_radps is None else (np.cumsum(u.gyr_radps, axis=0) / u.rate_hz)[::every]
+    up = _up_in_sensor(acc, angle, rate)
     a_up = np.einsum("ij,ij->i", acc, up)
     a_h = acc - a_up[:, None] * up
 
@@ -203,7 +207,7 @@ def trunk_motion(u: UniformImu, t_start_s: np.ndarray, t_end_s: np.ndarray, spee
     # forward axis: principal direction of the step-averaged horizontal acceleration (lateral cancels over L/R)
     ok = seg >= 0
     a_hc = a_h - np.stack([_per_segment_mean(a_h[:, i], seg, n) for i in range(3)], 1)[np.maximum(seg, 0)]
-    phase = (u.t_s - t_start_s[np.maximum(seg, 0)]) / (t_end_s - t_start_s)[np.maximum(seg, 0)]
+    phase = (t_s - t_start_s[np.maximum(seg, 0)]) / (t_end_s - t_start_s)[np.maximum(seg, 0)]
     b = np.clip((phase * WAVEFORM_BINS).astype(int), 0, WAVEFORM_BINS - 1)[ok]
     wave = np.stack([np.bincount(b, weights=a_hc[ok, i], minlength=WAVEFORM_BINS) for i in range(3)], 1)
     fwd = np.linalg.svd(wave, full_matrices=False)[2][0]
@@ -212,7 +216,7 @@ def trunk_motion(u: UniformImu, t_start_s: np.ndarray, t_end_s: np.ndarray, spee
         dv = -dv
     v = np.asarray(speed_mps, float)[np.maximum(seg, 0)] + dv
     keep = ok & ~bad[np.maximum(seg, 0)]
-    return u.t_s[keep], z[keep], v[keep]
+    return t_s[keep], z[keep], v[keep]
 
 
 # ----------------------------------------------------------------------------------------------------------------
