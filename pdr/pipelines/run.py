@@ -26,9 +26,9 @@ from pdr.geo import latlon_to_en
 from pdr.heading import AttitudeStepHeading
 from pdr.io.atomic import atomic_dir
 from pdr.io.recording import Recording, load_recording
+from pdr.pipelines.bouts import recording_bouts
 from pdr.pipelines.faults import rejected_gnss, sensor_faults, warning_line, warning_objects, widen_steps
 from pdr.pipelines.foot import foot_strides
-from pdr.pipelines.bouts import recording_bouts
 from pdr.pipelines.gait_forms import per_form_step_lengths
 from pdr.pipelines.leg_camera import camera_strides
 from pdr.pipelines.steps import detect_steps, make_detector
