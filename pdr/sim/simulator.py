@@ -212,8 +212,9 @@ def true_bouts(kin: WalkKinematics, steps: pd.DataFrame, mass_kg: float | None) 
     t0, t1 = t[k - 1], t[k]
     grid = np.arange(np.floor(t0[0] * MECHANICS_RATE_HZ), np.ceil(t1[-1] * MECHANICS_RATE_HZ) + 1) / MECHANICS_RATE_HZ
     grid = grid[np.searchsorted(t1, grid, side="right") < len(t1)]
-    z = kin.pelvis_position_m(grid)[:, 2]
-    v = np.gradient(kin.pelvis_state(grid)["s_m"], grid)
+    pelvis = kin.pelvis_state(grid)
+    z = kin.route.to_world(pelvis["s_m"], np.zeros(len(grid)), pelvis["h_m"])[:, 2]  # the height of pelvis_position_m
+    v = np.gradient(pelvis["s_m"], grid)
     lengths = steps["step_length_m"].to_numpy(float)
     mech = pd.DataFrame({"bout_id": bout[k], "t_start_s": t0, "t_end_s": t1, "speed_mps": lengths[k] / (t1 - t0)})
     mech = pd.concat([mech, step_energies(grid, z, v, t0, t1, mass_kg)], axis=1)
