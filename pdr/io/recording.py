@@ -37,6 +37,7 @@ REFERENCE_TABLES = {
     "strides": ("t_start_s", "t_end_s", "foot", "length_m"),
     "trajectory": ("t_s", "e_m", "n_m"),
     "landmarks": ("t_s", "e_m", "n_m"),
+    "bouts": ("t_start_s", "t_end_s"),
 }
 VIDEO_NAMES = ("video.avi", "video.mp4")
 

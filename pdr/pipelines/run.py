@@ -26,12 +26,15 @@ from pdr.geo import latlon_to_en
 from pdr.heading import AttitudeStepHeading
 from pdr.io.atomic import atomic_dir
 from pdr.io.recording import Recording, load_recording
+from pdr.pipelines.bouts import recording_bouts
 from pdr.pipelines.faults import rejected_gnss, sensor_faults, warning_line, warning_objects, widen_steps
 from pdr.pipelines.foot import foot_chain, foot_strides
 from pdr.pipelines.gait_forms import per_form_step_lengths
 from pdr.pipelines.leg_camera import camera_strides
 from pdr.pipelines.steps import detect_steps, make_detector
 from pdr.report import (
+    write_bouts_csv,
+    write_bouts_plot,
     write_geojson,
     write_gpx,
     write_json,
@@ -222,6 +225,9 @@ def run_recording(rec: Path, out: Path, *, config_path=None, model_path=None, us
         stride_scales = getattr(fusion, "stride_scales_", None) or {}  # per source; the EKF does not use strides
         lap("fusion_s")
 
+        bouts, bout_steps = recording_bouts(recording, steps, gnss)  # bouts.csv: walking bouts and their mechanics
+        lap("bouts_s")
+
     run_warnings = [" ".join(str(w.message).split()) for w in caught]
     rejected = (rejected_gnss(gnss, gnss_suspect, gnss_used, float(traj["t_s"].iloc[0]), float(traj["t_s"].iloc[-1]))
                 if gnss is not None else [])
@@ -278,6 +284,7 @@ def run_recording(rec: Path, out: Path, *, config_path=None, model_path=None, us
         if strides is not None:
             write_strides_csv(tmp / "strides.csv", strides)
         write_trajectory_csv(tmp / "trajectory.csv", traj, origin)
+        write_bouts_csv(tmp / "bouts.csv", bouts)
         write_geojson(tmp / "trajectory.geojson", traj, origin, name=recording.id)
         write_tum(tmp / "trajectory.tum", traj)
         if origin is not None:
@@ -288,6 +295,7 @@ def run_recording(rec: Path, out: Path, *, config_path=None, model_path=None, us
                 plot_gnss = gnss[["t_s", "e_m", "n_m", "masked"]].assign(used=gnss_used)
             write_plot(tmp / "trajectory.png", traj, gnss=plot_gnss,
                        title=f"{recording.id}: {len(steps)} steps, {distance:.1f} m ({method} fusion)")
+            write_bouts_plot(tmp / "bouts.png", bouts, bout_steps, title=f"{recording.id}: walking bouts")
         write_json(tmp / "run.json", provenance)
         lap("write_s")
         summary["timings_s"] = {**timings, "total_s": sum(timings.values())}

@@ -1,4 +1,5 @@
-"""``trajectory.png``: the path, its 1-sigma uncertainty ellipses, GNSS fixes used and dropped (matplotlib, Agg backend)."""
+"""The plots of ``pdr run --plot`` (matplotlib, Agg backend): ``trajectory.png`` (the path, its 1-sigma uncertainty
+ellipses, GNSS fixes used and dropped) and ``bouts.png`` (walking bouts: speed, cadence, lift and power per step)."""
 
 from __future__ import annotations
 
@@ -81,5 +82,49 @@ def write_plot(path: Path, traj: pd.DataFrame, *, gnss: pd.DataFrame | None = No
     ax.grid(True, lw=0.3)
     ax.set_title(title, fontsize=10)
     ax.legend(loc="best", fontsize=8)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png", metadata={"Software": None})
+
+
+def write_bouts_plot(path: Path, bouts: pd.DataFrame, steps: pd.DataFrame, *, title: str = "") -> None:
+    """``bouts.png``: per step over time, the speed and cadence (top), the trunk's lift (middle) and the powers against
+    gravity and inertia and the external power (bottom); the bouts shaded and numbered.
+
+    ``bouts``: ``bouts.csv``; ``steps``: the per-step mechanics (:data:`pdr.gait.mechanics.STEP_COLUMNS`).
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(9.0, 7.5), dpi=110)
+    ax_speed, ax_lift, ax_power = fig.subplots(3, 1, sharex=True)
+    t_mid = 0.5 * (steps["t_start_s"].to_numpy(float) + steps["t_end_s"].to_numpy(float))
+    dur = (steps["t_end_s"] - steps["t_start_s"]).to_numpy(float)
+    for ax in (ax_speed, ax_lift, ax_power):
+        for b in bouts.itertuples():
+            ax.axvspan(b.t_start_s, b.t_end_s, color="tab:gray", alpha=0.12, lw=0)
+        ax.grid(True, lw=0.3)
+    for b in bouts.itertuples():
+        ax_speed.annotate(str(b.bout_id), (0.5 * (b.t_start_s + b.t_end_s), 1.0), xycoords=("data", "axes fraction"),
+                          ha="center", va="bottom", fontsize=7)
+    ax_speed.plot(t_mid, steps["speed_mps"], ".", ms=3, color="tab:blue", label="speed")
+    ax_speed.set_ylabel("speed (m/s)", color="tab:blue")
+    ax_cad = ax_speed.twinx()
+    ax_cad.plot(t_mid, 60.0 / np.where(dur > 0, dur, np.nan), ".", ms=3, color="tab:orange", label="cadence")
+    ax_cad.set_ylabel("cadence (steps/min)", color="tab:orange")
+    ax_lift.plot(t_mid, 1e3 * steps["lift_m"].to_numpy(float), ".", ms=3, color="tab:green")
+    ax_lift.set_ylabel("trunk lift (mm)")
+    for kind, color in (("gravity", "tab:red"), ("inertia", "tab:purple"), ("external", "black")):
+        ax_power.plot(t_mid, steps[f"work_{kind}_j"].to_numpy(float) / np.where(dur > 0, dur, np.nan), ".", ms=3,
+                      color=color, label=f"against {kind}" if kind != "external" else "external (total)")
+    ax_power.set_ylabel("power (W)")
+    ax_power.set_xlabel("time (s)")
+    if steps[["work_gravity_j", "work_inertia_j"]].notna().any().any():
+        ax_power.legend(loc="best", fontsize=7)
+    else:
+        ax_power.text(0.5, 0.5, "no mechanics (no trunk sensor, precise GNSS or body mass)", transform=ax_power.transAxes,
+                      ha="center", va="center", fontsize=8)
+    fig.suptitle(title, fontsize=10)
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format="png", metadata={"Software": None})

@@ -5,7 +5,9 @@ formats, sorted JSON keys, no time stamps. Tables are the flat, unit-named table
 
 - a trajectory: ``t_s, e_m, n_m, heading_rad, e_std_m, n_std_m`` (first row = the start pose, then one row per step);
 - steps: ``step_id, t_s, step_length_m, step_length_std_m, step_freq_hz, heading_rad, source``;
-- strides: ``t_start_s, t_end_s, foot, length_m, length_std_m, source``.
+- strides: ``t_start_s, t_end_s, foot, length_m, length_std_m, source``;
+- bouts: ``bout_id, t_start_s, t_end_s, n_steps, distance_m, speed_mps, cadence_spm, step_length_m, step_length_cv,
+  vertical_lift_m, speed_variation_mps, power_gravity_w, power_inertia_w, power_external_w, mechanics_source``.
 
 Frames: east-north-up local frame of the recording's ``[geo]`` origin, heading counter-clockwise from east.
 """
@@ -23,6 +25,7 @@ import pandas as pd
 
 from pdr import __version__
 from pdr.errors import InputError
+from pdr.gait.mechanics import BOUT_COLUMNS
 from pdr.geo import en_to_latlon
 from pdr.io.atomic import write_csv, write_text
 
@@ -87,6 +90,16 @@ def write_steps_csv(path: Path, steps: pd.DataFrame) -> None:
 def write_strides_csv(path: Path, strides: pd.DataFrame) -> None:
     _require(strides, STRIDES_COLUMNS, "strides")
     _write_table(path, strides[list(STRIDES_COLUMNS)].reset_index(drop=True))
+
+
+def write_bouts_csv(path: Path, bouts: pd.DataFrame) -> None:
+    """``bouts.csv`` (:data:`pdr.gait.mechanics.BOUT_COLUMNS`); speeds to 0.1 mm/s, cadence and powers to 0.01."""
+    _require(bouts, BOUT_COLUMNS, "bouts")
+    table = bouts[list(BOUT_COLUMNS)].reset_index(drop=True)
+    for col, decimals in (("speed_mps", 4), ("speed_variation_mps", 4), ("cadence_spm", 2), ("step_length_cv", 4),
+                          ("power_gravity_w", 2), ("power_inertia_w", 2), ("power_external_w", 2)):
+        table[col] = np.round(table[col].to_numpy(float), decimals) + 0.0
+    _write_table(path, table)
 
 
 def jsonable(value: Any) -> Any:

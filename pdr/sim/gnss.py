@@ -93,7 +93,7 @@ def simulate_gnss(spec: GnssSpec, t_s: np.ndarray, truth_enu: np.ndarray, availa
     err *= inflate[:, None]
     sigma = np.hypot(spec.noise_m, spec.markov_sigma_m)
     slow = _gauss_markov(rng, n, dt, 0.15, 60.0, 1)[:, 0]
-    h_acc = np.maximum(spec.h_acc_bias * sigma * inflate * np.exp(slow), 0.3)
+    h_acc = np.maximum(spec.h_acc_bias * sigma * inflate * np.exp(slow), min(0.3, spec.noise_m))  # DGPS: cm-level
     idx_ok = np.flatnonzero(available)
     outlier = np.zeros(n, bool)
     n_out = int(round(spec.outlier_fraction * len(idx_ok)))

@@ -39,6 +39,7 @@ import numpy as np
 import pandas as pd
 
 from pdr.errors import InputError, check_keys
+from pdr.gait.mechanics import bout_table, step_energies, step_intervals
 from pdr.geo import en_to_latlon
 from pdr.io.recording import Recording, save_recording
 from pdr.io.tomlio import read_toml
@@ -61,6 +62,7 @@ KEYS = {
     "gait": {"cv_slow": float, "cv_fast": float},
 }
 TRAJECTORY_RATE_HZ = 10.0
+MECHANICS_RATE_HZ = 100.0  # pelvis samples per second for the reference mechanics (reference/bouts.csv)
 DEFAULT_ORIGIN = (46.5191, 6.5668, 400.0)
 # fixed sub-stream keys of the seed
 _RNG_PERSON, _RNG_STEPS, _RNG_GNSS, _RNG_STEEL, _RNG_BARO, _RNG_CAMERA, _RNG_IMU = 1, 2, 3, 4, 5, 6, 10
@@ -201,6 +203,26 @@ def build_walk(sc: Scenario, seed: int) -> WalkKinematics:
     return WalkKinematics(body, user, bouts, route)
 
 
+def true_bouts(kin: WalkKinematics, steps: pd.DataFrame, mass_kg: float | None) -> pd.DataFrame:
+    """``reference/bouts.csv``: the columns of ``bouts.csv`` from the body itself: the pelvis centre's height and its
+    forward speed along the path (the derivative of its path length), sampled at ``MECHANICS_RATE_HZ`` between the
+    true contacts, with the definitions of :mod:`pdr.gait.mechanics`."""
+    t, bout = steps["t_s"].to_numpy(float), steps["bout_id"].to_numpy(int)
+    k, _ = step_intervals(t, bout)  # every true interval is one step
+    t0, t1 = t[k - 1], t[k]
+    grid = np.arange(np.floor(t0[0] * MECHANICS_RATE_HZ), np.ceil(t1[-1] * MECHANICS_RATE_HZ) + 1) / MECHANICS_RATE_HZ
+    grid = grid[np.searchsorted(t1, grid, side="right") < len(t1)]
+    pelvis = kin.pelvis_state(grid)
+    z = kin.route.to_world(pelvis["s_m"], np.zeros(len(grid)), pelvis["h_m"])[:, 2]  # the height of pelvis_position_m
+    v = np.gradient(pelvis["s_m"], grid)
+    lengths = steps["step_length_m"].to_numpy(float)
+    mech = pd.DataFrame({"bout_id": bout[k], "t_start_s": t0, "t_end_s": t1, "speed_mps": lengths[k] / (t1 - t0)})
+    mech = pd.concat([mech, step_energies(grid, z, v, t0, t1, mass_kg)], axis=1)
+    out = bout_table(steps, mech)
+    out["mechanics_source"] = "simulator"
+    return out
+
+
 def _reference(kin: WalkKinematics, sc: Scenario, gnss_truth: pd.DataFrame | None) -> dict[str, Any]:
     steps = kin.true_steps()
     step_len = steps["step_length_m"].to_numpy()
@@ -237,7 +259,8 @@ def _reference(kin: WalkKinematics, sc: Scenario, gnss_truth: pd.DataFrame | Non
         summary["gnss_outliers"] = int(gnss_truth["outlier"].sum())
         ok = gnss_truth["outlier"] == 0
         summary["gnss_error_rms_m"] = float(np.sqrt(np.mean(gnss_truth.loc[ok, "error_m"] ** 2))) if ok.any() else float("nan")
-    return {"steps": steps, "strides": strides, "trajectory": traj, "summary": summary}
+    bouts = true_bouts(kin, steps, sc.subject.get("mass_kg"))
+    return {"steps": steps, "strides": strides, "trajectory": traj, "bouts": bouts, "summary": summary}
 
 
 def _render_camera(kin: WalkKinematics, cfg: dict[str, Any], seed: int, workdir: Path, duration_s: float):
