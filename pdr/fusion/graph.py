@@ -523,9 +523,13 @@ class FactorGraphFusion(Algorithm):
             use = new_use
         last_change_m = float(np.max(np.abs(f), initial=0.0))
         if not converged and (calibrate or scale_steps):
-            warnings.warn(f"graph fusion: the step-model calibration did not converge in {alternation} alternations "
-                          f"(last change {last_change_m:.3g} m > {self.alternation_tol_m:g} m); the step model "
-                          "given is kept", stacklevel=2)
+            blocks = {"step model": slice(0, 3), "gyro bias": i_bias, "magnetometer deviation": i_dev,
+                      "stride scales": i_scale, "step scale": slice(i_step_scale, i_step_scale + 1)}
+            worst = max(blocks, key=lambda b: np.max(np.abs(f[blocks[b]]), initial=0.0))
+            what = "the GNSS gate still changing" if not same_gate else f"largest in the {worst}"
+            warnings.warn(f"graph fusion: the calibration did not converge in {alternation} alternations (last change "
+                          f"{last_change_m:.3g} m > {self.alternation_tol_m:g} m, {what}); the step model given is kept",
+                          stacklevel=2)
         theta = params[:3]
         bias = SmoothSeries(bias.t0_s, bias.knot_s, params[i_bias])
         t_marg = time.perf_counter()
