@@ -176,11 +176,10 @@ def _person_errors(height_m: float, cohort: str, seed: int, speeds: tuple[float,
 
 def _people_rows(quick: bool) -> list[dict]:
     anchor = "issue 17: <= 5% per group; mobgap SlZijlstra on a kept-back MS walker: +7%"
-    seeds = [10, 11] if quick else [10, 11, 12, 13]
-    groups = [("[tuning]", 1.75, "healthy", [0, 1])]
-    groups += [("[test]", h, "healthy", seeds) for h in (1.50, 1.60, 1.70, 1.80, 1.95)]
-    groups += [("[test]", 1.70, "older", seeds)]
-    groups += [("[test]", h, "impaired", seeds) for h in (1.60, 1.75)]
+    n = 2 if quick else 4
+    tests = [(h, "healthy") for h in (1.50, 1.60, 1.70, 1.80, 1.95)] + [(1.70, "older"), (1.60, "impaired"), (1.75, "impaired")]
+    groups = [("[tuning]", 1.75, "healthy", [0, 1])]  # other people in every group: seeds 10-13, 14-17, ...
+    groups += [("[test]", h, cohort, list(range(10 + 4 * i, 10 + 4 * i + n))) for i, (h, cohort) in enumerate(tests)]
     rows = []
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
