@@ -240,3 +240,23 @@ def test_simulated_subject_is_measured_not_exact():
     assert rec.subject["leg_length_m"] != pytest.approx(summary["leg_length_m"], abs=1e-4)
     assert abs(rec.subject["leg_length_m"] - summary["leg_length_m"]) < 0.05
     assert rec.subject["sensor_height_m"] > summary["leg_length_m"]  # a lower-back sensor sits above the hips
+
+
+def test_cli_calibrate_from_landmarks_and_a_trajectory(tmp_path, capsys):
+    rec_a = _pocket_walk(tmp_path / "a", with_gnss=False, seed=7)
+    rec_b = _pocket_walk(tmp_path / "b", with_gnss=False, seed=8)
+    traj = load_recording(rec_a).reference["trajectory"]
+    passings = traj[traj["t_s"].isin([5.0, 20.0, 35.0, 50.0])][["t_s", "e_m", "n_m"]]  # points along the straight walk
+    passings.to_csv(tmp_path / "points.csv", index=False)
+    load_recording(rec_b).reference["trajectory"][["t_s", "e_m", "n_m"]].to_csv(tmp_path / "path.csv", index=False)
+    out = tmp_path / "model.json"
+    assert main(["calibrate", str(rec_a), str(rec_b), "-o", str(out), "--landmarks", str(tmp_path / "points.csv"),
+                 "--trajectory", str(tmp_path / "path.csv")]) == 1  # two sources for the first recording
+    assert "one distance source per recording" in capsys.readouterr().err
+    assert main(["calibrate", str(rec_a), "-o", str(out), "--landmarks", str(tmp_path / "points.csv")]) == 0
+    doc = json.loads(out.read_text())
+    assert doc["info"]["sources"] == ["landmarks"] and doc["info"]["n_segments"] == 3
+    truth = load_recording(rec_a).reference["summary"]["mean_step_length_m"]
+    model = load_model(out)
+    assert model.estimate(pd.DataFrame({"step_freq_hz": [1.3 / truth], "acc_var_m2ps4": [3.0]})).step_length_m_[0] == \
+        pytest.approx(truth, rel=0.05)

@@ -4,7 +4,8 @@ Each recording brings its distances from one source: ``--distance-m D`` (the who
 corridor, a track lap), ``--landmarks CSV`` (``t_s, e_m, n_m``: surveyed points passed in turn, walked straight
 between), ``--trajectory CSV`` (``t_s, e_m, n_m``: a reference path, its length over 30 s windows), else its GNSS.
 The k-th ``--distance-m`` / ``--landmarks`` / ``--trajectory`` belongs to the k-th recording (give the walks of known
-length first); the others use their GNSS. ``reference/`` is never read unless its file is named that way.
+length first); the others use their GNSS. ``reference/`` is never read (a file given on the command line is the
+user's own distance information).
 
 Load each recording, detect its steps, take the prior of the person (``[step_length]``, else the body-based model of
 the first recording's ``[subject]`` and placement, :func:`pdr.step_length.body_model`), run
