@@ -11,9 +11,8 @@ Widening (the trajectory stays one continuous chain of poses; only the weights c
 
 - a step whose interval (previous contact to its contact) meets a gap, or a stuck, saturated, duplicated or
   resampled accelerometer: its length is known to ``FAULT_LENGTH_STD_FRACTION`` of a typical step (the median of the
-  others) at best; a step over a
-  gap longer than the fusion's ``max_step_duration_s`` is already a *gap step* there (displacement known only to a
-  walking speed times its duration);
+  others) at best; a step over a gap longer than the fusion's ``max_step_duration_s`` is already a *gap step* there
+  (displacement known only to a walking speed times its duration);
 - ... meets a gap or a faulty gyroscope: its heading change is known to ``FAULT_HEADING_CHANGE_STD_RAD`` at best;
 - ... meets a magnetic disturbance: no magnetic heading;
 - GNSS fixes that jumped are not used (as if masked).
