@@ -140,7 +140,7 @@ def sim_walk():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         raw = read_toml(ROOT / "configs" / "sim" / "walk_short.toml")
-        raw["segment"][3]["speed_mps"] = 2.8  # a run: the accelerometer goes beyond 2 g
+        raw["segment"][3]["speed_mps"] = 3.0  # a run: the accelerometer goes beyond 2 g
         return simulate(raw, seed=2)
 
 

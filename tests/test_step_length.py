@@ -79,7 +79,7 @@ def test_single_frequency_fits_a_only():
     m = RegressionStepLength.population()
     with pytest.warns(UserWarning, match="a_m only"):
         m.fit(steps, 0.75 + 0.02 * rng.standard_normal(50))
-    assert m.b_m_per_hz == 0.384 and m.c_m_per_m2ps4 == 0.0
+    assert m.b_m_per_hz == RegressionStepLength.preset["b_m_per_hz"] and m.c_m_per_m2ps4 == 0.0
     assert m.estimate(steps).step_length_m_.mean() == pytest.approx(0.75, abs=0.01)
 
 

@@ -3,7 +3,7 @@
 :class:`RecursiveStepCalibration`: without GNSS, a constant step value over windows of 20 steps moved by the mean
 residual of the model. :class:`AdaptiveKalmanCalibration`: with GNSS, an adaptive Kalman filter on the step length
 from "GPS distance / number of steps" segments (:func:`gnss_segments`), and the model's parameters re-estimated
-(A only when one walking frequency is seen). ``pdr calibrate`` (pdr.pipelines.calibrate) writes the result.
+(a Bayesian update with the model's covariance as prior: one walking frequency fixes mainly the level). ``pdr calibrate`` (pdr.pipelines.calibrate) writes the result.
 """
 
 from pdr.calibration.akf import AdaptiveKalmanCalibration

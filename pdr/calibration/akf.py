@@ -9,8 +9,9 @@ import numpy as np
 import pandas as pd
 
 from pdr.base import Algorithm
-from pdr.calibration.segments import gnss_segments
+from pdr.calibration.segments import distance_segments, gnss_segments
 from pdr.errors import InputError
+from pdr.fusion._linear import bounded_map
 from pdr.step_length.models import StepLengthModel
 
 TRACE_COLUMNS = ("rec_index", "t_s", "model_step_m", "step_length_m", "step_length_std_m", "process_std_m")
@@ -33,7 +34,7 @@ class AdaptiveKalmanCalibration(Algorithm):
     min_segment_steps, max_h_acc_m, assumed_h_acc_m, min_straightness, min_step_m, max_step_m : the segment gates
         of :func:`pdr.calibration.segments.gnss_segments` (``assumed_h_acc_m`` for fixes without ``h_acc_m``).
     min_freq_spread_hz : the segments see "several walking frequencies" when the standard deviation of their mean
-        step frequencies reaches this; otherwise only A (the first parameter) is updated.
+        step frequencies reaches this (``updated_ = "all"``); otherwise the data fix mainly the level (``"level"``).
     outlier_h_acc_factor, gnss_smoothing_s : GNSS outlier test and local line fit before the segments
         (:func:`pdr.calibration.segments.clean_fixes`; 0 s = no smoothing).
     adapt_gnss_noise : scale the GNSS part of the measurement noise to the residuals of a first fit (see Notes).
@@ -41,7 +42,8 @@ class AdaptiveKalmanCalibration(Algorithm):
     Attributes
     ----------
     model_ : the calibrated model (same class as the one given; parameters and covariance updated).
-    updated_ : which parameters were updated: ``"all"``, the name of the first parameter (one frequency), or ``"none"``.
+    updated_ : what the data identified: ``"all"`` (several walking frequencies), ``"level"`` (one: the slope stays near
+        its prior), or ``"none"`` (no usable segment, model unchanged).
     segments_ : every candidate GNSS segment of the filter (``gnss_segments`` columns + ``rec_index``,
         ``measured_std_m``, ``model_step_m``, ``innovation_m``, ``freq_hz``), with ``used`` and the rejection ``reason``.
     model_segments_ : the same for the (longer) segments of the model fit.
@@ -65,8 +67,11 @@ class AdaptiveKalmanCalibration(Algorithm):
     change of pace is followed within a few segments and a steady pace is averaged over many.
     The model: every used segment is a linear measurement of the parameters (the mean over its steps of the model's
     design row), combined with the model's covariance as prior (Bayesian least squares, i.e. the regression of the
-    filtered step lengths on the features with a prior). With one walking frequency only A is updated, the others
-    kept "until new frequencies can be observed".
+    filtered step lengths on the features with a prior). The prior is the body-based model of the person
+    (:func:`pdr.step_length.body_model`), so the parameters shrink toward it: segments at one walking frequency fix
+    the level there and leave the slope near its prior (the paper updates A only "until new frequencies can be
+    observed"; the Bayesian update does the same in the directions the data do not see), several frequencies fix the
+    slope too. The cadence slope is held at >= 0 (with a warning when the data ask for less).
 
     Example
     -------
@@ -113,36 +118,42 @@ class AdaptiveKalmanCalibration(Algorithm):
             raise InputError(f"AdaptiveKalmanCalibration: expected min_straightness in [0, 1], found {self.min_straightness!r}")
 
     def fit(self, steps: pd.DataFrame | list[pd.DataFrame], gnss: pd.DataFrame | list[pd.DataFrame | None],
-            model: StepLengthModel, subject: dict | list[dict | None] | None = None):
+            model: StepLengthModel, subject: dict | list[dict | None] | None = None,
+            distances: pd.DataFrame | list[pd.DataFrame | None] | None = None):
         """Calibrate ``model`` on one recording's steps and GNSS (``t_s, e_m, n_m[, h_acc_m]`` in the local frame), or
-        on lists of them (one entry per recording; a None GNSS contributes no segment). Returns self."""
+        on lists of them (one entry per recording; a None GNSS contributes no segment). ``distances``: per recording,
+        None or a table of known walked distances (:func:`pdr.calibration.segments.distance_segments`: a walk of
+        known length, landmarks, a reference trajectory), used instead of its GNSS. Returns self."""
         self._check()
         if not isinstance(model, StepLengthModel):
             raise InputError(f"AdaptiveKalmanCalibration: expected a step-length model, found {type(model).__name__}")
         steps_list = steps if isinstance(steps, list) else [steps]
         gnss_list = gnss if isinstance(gnss, list) else [gnss]
         subjects = subject if isinstance(subject, list) else [subject] * len(steps_list)
-        if not (len(steps_list) == len(gnss_list) == len(subjects)):
+        known = distances if isinstance(distances, list) else [distances] * len(steps_list)
+        if not (len(steps_list) == len(gnss_list) == len(subjects) == len(known)):
             raise InputError(f"AdaptiveKalmanCalibration: expected as many GNSS tables and subjects as steps tables, "
                              f"found {len(steps_list)} steps, {len(gnss_list)} GNSS, {len(subjects)} subjects")
         prepared = []
         for st, subj in zip(steps_list, subjects):
             x = model.design(st, subj) if len(st) else np.empty((0, len(model.theta_names)))
             prepared.append((st, x, np.clip(x @ model.theta, 0.0, None)))
-        filt_segs, _ = self._segments(prepared, gnss_list, self.segment_steps)
-        model_segs, design = self._segments(prepared, gnss_list, self.model_segment_steps)
+        filt_segs, _ = self._segments(prepared, gnss_list, known, self.segment_steps)
+        model_segs, design = self._segments(prepared, gnss_list, known, self.model_segment_steps)
         used = model_segs["used"].to_numpy(bool)
+        from_gnss = used & ~np.isfinite(model_segs["distance_std_m"].to_numpy(float))
         # measurement noise: 5 cm plus the GNSS part, scaled to the residuals of a first fit (consecutive fixes share
         # their slowly varying error, and smoothing removes white noise, so h_acc alone is pessimistic)
         self.gnss_noise_scale_ = 1.0
         self._set_noise(model_segs)
-        if self.adapt_gnss_noise and used.sum() > len(model.theta_names) + 2:
+        if self.adapt_gnss_noise and from_gnss.sum() > len(model.theta_names) + 2:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 first, _ = self._update_model(model, design[used], model_segs[used])
-            resid = model_segs.loc[used, "measured_step_m"].to_numpy() - design[used] @ first.theta
-            excess = resid ** 2 - self.measurement_std_m ** 2 - float(model.residual_std_m) ** 2 / model_segs.loc[used, "n_steps"]
-            ratio = float(np.mean(excess) / np.mean(model_segs.loc[used, "gnss_std_m"] ** 2))
+            g = from_gnss
+            resid = model_segs.loc[g, "measured_step_m"].to_numpy() - design[g] @ first.theta
+            excess = resid ** 2 - self.measurement_std_m ** 2 - float(model.residual_std_m) ** 2 / model_segs.loc[g, "n_steps"]
+            ratio = float(np.mean(excess) / np.mean(model_segs.loc[g, "gnss_std_m"] ** 2))
             self.gnss_noise_scale_ = float(np.clip(np.sqrt(max(ratio, 0.0)), 0.25, 2.0))
             self._set_noise(model_segs)
         self._set_noise(filt_segs)
@@ -163,12 +174,19 @@ class AdaptiveKalmanCalibration(Algorithm):
         self.model_, self.updated_ = self._update_model(model, design[used], model_segs[used])
         return self
 
-    def _segments(self, prepared: list, gnss_list: list, segment_steps: float) -> tuple[pd.DataFrame, np.ndarray]:
-        """Segments of ``segment_steps`` over all recordings, with each one's mean frequency, model step and design row."""
+    def _segments(self, prepared: list, gnss_list: list, known: list,
+                  segment_steps: float) -> tuple[pd.DataFrame, np.ndarray]:
+        """Segments of ``segment_steps`` over all recordings (their known distances instead where given), with each
+        one's mean frequency, model step and design row."""
         tables, designs = [], []
-        for r, ((st, x, pred), gn) in enumerate(zip(prepared, gnss_list)):
-            segs = gnss_segments(st, gn if gn is not None else _NO_GNSS,
-                                 **{**self._seg_args(), "segment_steps": segment_steps}).assign(rec_index=r)
+        for r, ((st, x, pred), gn, dist) in enumerate(zip(prepared, gnss_list, known)):
+            if dist is not None:
+                segs = distance_segments(st, dist, min_segment_steps=self.min_segment_steps, min_step_m=self.min_step_m,
+                                         max_step_m=self.max_step_m).assign(rec_index=r)
+            else:
+                segs = gnss_segments(st, gn if gn is not None else _NO_GNSS,
+                                     **{**self._seg_args(), "segment_steps": segment_steps}).assign(rec_index=r,
+                                                                                                     distance_std_m=np.nan)
             freq = st["step_freq_hz"].to_numpy(float) if "step_freq_hz" in st.columns else np.full(len(st), np.nan)
             spans = list(zip(segs["k_first"], segs["k_last"]))
             segs["freq_hz"] = [float(np.nanmean(freq[a:b + 1])) if b >= a and np.isfinite(freq[a:b + 1]).any() else np.nan
@@ -179,8 +197,11 @@ class AdaptiveKalmanCalibration(Algorithm):
         return pd.concat(tables, ignore_index=True), np.concatenate(designs)
 
     def _set_noise(self, segs: pd.DataFrame) -> None:
+        """Per segment: the GNSS part of the noise of its measured step, and the whole (a known distance: its own)."""
         segs["gnss_std_m"] = np.sqrt(2.0) * segs["h_acc_m"] / (segs["n_steps"] * segs["straightness"])
-        segs["measured_std_m"] = np.hypot(self.measurement_std_m, self.gnss_noise_scale_ * segs["gnss_std_m"])
+        gnss_std = np.hypot(self.measurement_std_m, self.gnss_noise_scale_ * segs["gnss_std_m"])
+        segs["measured_std_m"] = np.where(np.isfinite(segs["distance_std_m"]), segs["distance_std_m"] / segs["n_steps"],
+                                          gnss_std)
 
     def _seg_args(self) -> dict:
         return dict(segment_steps=self.segment_steps, min_segment_steps=self.min_segment_steps, max_h_acc_m=self.max_h_acc_m,
@@ -238,8 +259,12 @@ class AdaptiveKalmanCalibration(Algorithm):
         return trace, innov
 
     def _update_model(self, model: StepLengthModel, x: np.ndarray, segs: pd.DataFrame) -> tuple[StepLengthModel, str]:
+        """Bayesian update of the parameters from the segments, the model's covariance as prior (parameters with zero
+        prior variance are kept, those of ``model.nonnegative`` held at >= 0); returns the model and what the data
+        identified: ``"all"`` (several walking frequencies), ``"level"`` (one: the slope stays near its prior),
+        ``"none"``."""
         if len(segs) == 0:
-            warnings.warn("calibration: no GNSS segment passed the gates (usable fixes, walking, straight); "
+            warnings.warn("calibration: no distance segment passed the gates (usable fixes, walking, straight); "
                           "the model is unchanged", stacklevel=3)
             return model.with_theta(model.theta, model.covariance_matrix), "none"
         theta0 = model.theta
@@ -250,30 +275,30 @@ class AdaptiveKalmanCalibration(Algorithm):
         z = segs["measured_step_m"].to_numpy(float)
         freq = segs["freq_hz"].to_numpy(float)
         several = p > 1 and np.isfinite(freq).sum() > 1 and float(np.nanstd(freq)) >= self.min_freq_spread_hz
-        free = np.diag(prior) > 0  # a parameter with zero prior variance is known exactly: kept
-        cols = [i for i in (range(p) if several or p == 1 else [0]) if free[i]]
+        cols = [i for i in range(p) if prior[i, i] > 0]  # a parameter with zero prior variance is known exactly
         if not cols:
-            warnings.warn(f"calibration: the parameters to update ({self._names(model, several)}) have zero prior "
-                          "variance in the model's covariance; the model is unchanged", stacklevel=3)
+            warnings.warn("calibration: every parameter has zero prior variance in the model's covariance; "
+                          "the model is unchanged", stacklevel=3)
             return model.with_theta(theta0, prior), "none"
         fixed = [i for i in range(p) if i not in cols]
-        resid = z - x @ theta0
         xf = x[:, cols]
+        y = z - x[:, fixed] @ theta0[fixed]
         prior_inv = np.linalg.inv(prior[np.ix_(cols, cols)])
-        post_cov = np.linalg.inv(prior_inv + xf.T @ (w[:, None] * xf))
-        delta = post_cov @ (xf.T @ (w * resid))
+        info = prior_inv + xf.T @ (w[:, None] * xf)
+        rhs = prior_inv @ theta0[cols] + xf.T @ (w * y)
+        bounded = tuple(cols.index(model.theta_names.index(n)) for n in model.nonnegative
+                        if model.theta_names.index(n) in cols)
+        sol, post_cov = bounded_map(info, rhs, bounded)
+        free_sol, _ = bounded_map(info, rhs)
+        for j in bounded:
+            if free_sol[j] < 0:
+                warnings.warn(f"calibration: the distances ask for {model.theta_names[cols[j]]} = {free_sol[j]:.3g} "
+                              "(step length falling as the cadence rises); held at 0", stacklevel=3)
         theta = theta0.copy()
-        theta[cols] += delta
+        theta[cols] = sol
         cov = prior.copy()
-        if fixed:  # the updated ones' correlations with the kept parameters are dropped
-            cov[cols, :] = 0.0
-            cov[:, cols] = 0.0
         cov[np.ix_(cols, cols)] = post_cov
-        return model.with_theta(theta, cov), "all" if len(cols) == p else ", ".join(model.theta_names[i] for i in cols)
-
-    @staticmethod
-    def _names(model: StepLengthModel, several: bool) -> str:
-        return ", ".join(model.theta_names if several else model.theta_names[:1])
+        return model.with_theta(theta, cov), "all" if several or p == 1 else "level"
 
 
 _NO_GNSS = pd.DataFrame({"t_s": pd.Series(dtype=float), "e_m": pd.Series(dtype=float), "n_m": pd.Series(dtype=float)})

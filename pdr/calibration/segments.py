@@ -20,6 +20,7 @@ from pdr.errors import InputError
 
 SEGMENT_COLUMNS = ("t_start_s", "t_end_s", "n_steps", "distance_m", "straightness", "h_acc_m", "measured_step_m",
                    "k_first", "k_last", "used", "reason")
+DISTANCE_COLUMNS = ("t_start_s", "t_end_s", "distance_m", "distance_std_m")
 
 
 def _check_steps(steps: pd.DataFrame) -> None:
@@ -146,3 +147,77 @@ def gnss_segments(steps: pd.DataFrame, gnss: pd.DataFrame, *, segment_steps: flo
         return empty
     out = pd.DataFrame(rows, columns=list(SEGMENT_COLUMNS))
     return out.astype({"k_first": int, "k_last": int, "used": bool})
+
+
+def distance_segments(steps: pd.DataFrame, distances: pd.DataFrame, *, min_segment_steps: float, min_step_m: float,
+                      max_step_m: float) -> pd.DataFrame:
+    """Segments of known walked distance (a measured corridor, a track lap, surveyed landmarks passed in turn): one
+    row per row of ``distances`` (``t_start_s, t_end_s, distance_m, distance_std_m``; NaN times = the whole
+    recording, every detected step), in the columns of :data:`SEGMENT_COLUMNS` plus ``distance_std_m``.
+
+    The steps of a segment are those whose contact falls in ``(t_start_s, t_end_s]``, fractional at both ends (the
+    step count interpolated in time between contacts); the same gates on steps and measured step as
+    :func:`gnss_segments`, no straightness (the distance is the path walked).
+    """
+    _check_steps(steps)
+    missing = [c for c in DISTANCE_COLUMNS if c not in distances.columns]
+    if missing:
+        raise InputError(f"calibration: expected distance columns {', '.join(DISTANCE_COLUMNS)}, missing {', '.join(missing)}")
+    t_step = steps["t_s"].to_numpy(float)
+    n_all = len(t_step)
+    rows = []
+    for r in distances.itertuples(index=False):
+        dist, std = float(r.distance_m), float(r.distance_std_m)
+        if not (np.isfinite(dist) and dist > 0 and np.isfinite(std) and std > 0):
+            raise InputError(f"calibration: expected a known distance > 0 m with a std > 0, found {dist} m +- {std} m")
+        if np.isnan(r.t_start_s) and np.isnan(r.t_end_s):
+            n, k_first, k_last = float(n_all), 0, n_all - 1
+            t0, t1 = (float(t_step[0]), float(t_step[-1])) if n_all else (np.nan, np.nan)
+        else:
+            t0, t1 = float(r.t_start_s), float(r.t_end_s)
+            count = np.interp([t0, t1], t_step, np.arange(n_all, dtype=float)) if n_all >= 2 else np.zeros(2)
+            n = float(count[1] - count[0])
+            k_first, k_last = int(np.floor(count[0])) + 1, int(np.floor(count[1]))
+        meas = dist / n if n > 0 else np.nan
+        if n < min_segment_steps:
+            reason = f"fewer than {min_segment_steps:g} steps"
+        elif not (min_step_m <= meas <= max_step_m):
+            reason = f"implausible step {meas:.2f} m"
+        else:
+            reason = ""
+        rows.append((t0, t1, n, dist, 1.0, np.nan, meas, k_first, k_last, reason == "", reason, std))
+    out = pd.DataFrame(rows, columns=[*SEGMENT_COLUMNS, "distance_std_m"])
+    return out.astype({"k_first": int, "k_last": int, "used": bool})
+
+
+def landmark_distances(landmarks: pd.DataFrame, position_std_m: float) -> pd.DataFrame:
+    """Known distances between consecutive surveyed landmarks (``t_s, e_m, n_m``: the time each was passed), walked
+    in a straight line: the table of :func:`distance_segments`, each distance known to ``sqrt(2)`` x the position
+    error of a landmark passing."""
+    missing = [c for c in ("t_s", "e_m", "n_m") if c not in landmarks.columns]
+    if missing:
+        raise InputError(f"calibration: expected landmarks columns t_s, e_m, n_m, missing {', '.join(missing)}")
+    lm = landmarks.sort_values("t_s")
+    t, e, n = (lm[c].to_numpy(float) for c in ("t_s", "e_m", "n_m"))
+    return pd.DataFrame({"t_start_s": t[:-1], "t_end_s": t[1:], "distance_m": np.hypot(np.diff(e), np.diff(n)),
+                         "distance_std_m": np.sqrt(2.0) * position_std_m})
+
+
+def trajectory_distances(trajectory: pd.DataFrame, segment_s: float, position_std_m: float) -> pd.DataFrame:
+    """Known distances from a reference trajectory (``t_s, e_m, n_m``): its path length over consecutive windows of
+    ``segment_s``, each known to ``sqrt(2)`` x ``position_std_m``."""
+    missing = [c for c in ("t_s", "e_m", "n_m") if c not in trajectory.columns]
+    if missing:
+        raise InputError(f"calibration: expected trajectory columns t_s, e_m, n_m, missing {', '.join(missing)}")
+    t, e, n = (trajectory[c].to_numpy(float) for c in ("t_s", "e_m", "n_m"))
+    ok = np.isfinite(t) & np.isfinite(e) & np.isfinite(n)
+    t, e, n = t[ok], e[ok], n[ok]
+    if len(t) < 2:
+        return pd.DataFrame({c: pd.Series(dtype=float) for c in DISTANCE_COLUMNS})
+    path = np.concatenate([[0.0], np.cumsum(np.hypot(np.diff(e), np.diff(n)))])
+    edges = np.arange(t[0], t[-1] + 1e-9, segment_s)
+    if edges[-1] < t[-1]:
+        edges = np.append(edges, t[-1])
+    s_at = np.interp(edges, t, path)
+    return pd.DataFrame({"t_start_s": edges[:-1], "t_end_s": edges[1:], "distance_m": np.diff(s_at),
+                         "distance_std_m": np.sqrt(2.0) * position_std_m})

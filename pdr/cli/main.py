@@ -66,10 +66,22 @@ def _cmd_run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _positive_metres(text: str) -> float:
+    """``--distance-m``: a number of metres > 0 (anything else is a usage error)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a distance in metres, found {text!r}") from None
+    if not (value > 0 and value < float("inf")):
+        raise argparse.ArgumentTypeError(f"expected a distance > 0 m, found {text}")
+    return value
+
+
 def _cmd_calibrate(args: argparse.Namespace) -> int:
     from pdr.pipelines.calibrate import calibrate_recordings
 
-    print(calibrate_recordings([Path(r) for r in args.recs], Path(args.output), config_path=args.config))
+    print(calibrate_recordings([Path(r) for r in args.recs], Path(args.output), config_path=args.config,
+                               distance_m=args.distance_m, landmarks=args.landmarks, trajectory=args.trajectory))
     return 0
 
 
@@ -179,6 +191,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("recs", nargs="+")
     p.add_argument("-o", "--output", required=True)
     p.add_argument("--config", default=None)
+    p.add_argument("--distance-m", type=_positive_metres, action="append", metavar="D",
+                   help="the k-th recording's walk was D metres (repeat per recording; others use GNSS)")
+    p.add_argument("--landmarks", action="append", metavar="CSV",
+                   help="the k-th recording passed these surveyed points (t_s, e_m, n_m) in turn")
+    p.add_argument("--trajectory", action="append", metavar="CSV",
+                   help="the k-th recording's reference path (t_s, e_m, n_m)")
     p.set_defaults(func=_cmd_calibrate)
 
     p = sub.add_parser("simulate", help="write a synthetic recording with its reference/")

@@ -33,16 +33,34 @@ def step_model_params(model, prior_std: tuple[float, float, float]) -> StepModel
 
 
 def solve_step_model(distance_m: np.ndarray, features: np.ndarray, std_m: np.ndarray,
-                     prior: StepModelParams) -> tuple[np.ndarray, np.ndarray]:
-    """MAP of ``theta`` for ``distance_i = features_i . theta + e_i``, ``e_i ~ N(0, std_i^2)``, prior ``N(theta0, P0)``.
+                     prior: StepModelParams, nonnegative: tuple[int, ...] = ()) -> tuple[np.ndarray, np.ndarray]:
+    """MAP of ``theta`` for ``distance_i = features_i . theta + e_i``, ``e_i ~ N(0, std_i^2)``, prior ``N(theta0, P0)``,
+    with the parameters of index ``nonnegative`` held at >= 0 (:func:`bounded_map`).
 
     Returns ``(theta, covariance)``; the covariance is conditional on the distances (the poses)."""
     w = 1.0 / np.square(std_m)
     p0_inv = np.linalg.inv(prior.covariance)
     info = features.T @ (features * w[:, None]) + p0_inv
     rhs = features.T @ (w * distance_m) + p0_inv @ prior.theta
+    return bounded_map(info, rhs, nonnegative)
+
+
+def bounded_map(info: np.ndarray, rhs: np.ndarray, nonnegative: tuple[int, ...] = ()) -> tuple[np.ndarray, np.ndarray]:
+    """The maximum of the Gaussian with information matrix ``info`` and vector ``rhs`` (mean ``info^-1 rhs``) subject
+    to ``theta[j] >= 0`` for ``j`` in ``nonnegative``: a parameter whose unconstrained value is negative is held at 0
+    and the others take their conditional mean (the exact constrained optimum when one bound is active); returns
+    ``(theta, covariance)``, the covariance that of the unconstrained Gaussian (a held parameter stays uncertain)."""
+    p = len(rhs)
     cov = np.linalg.inv(info)
-    return cov @ rhs, cov
+    held: list[int] = []
+    while True:
+        free = [j for j in range(p) if j not in held]
+        theta = np.zeros(p)
+        theta[free] = np.linalg.solve(info[np.ix_(free, free)], rhs[free])
+        negative = [j for j in nonnegative if j in free and theta[j] < 0]
+        if not negative:
+            return theta, cov
+        held.append(min(negative, key=lambda j: theta[j]))
 
 
 def deviation_design(heading_rad: np.ndarray) -> np.ndarray:

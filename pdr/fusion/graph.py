@@ -358,7 +358,8 @@ class FactorGraphFusion(Algorithm):
         self.step_scale_ = {"scale": 1.0, "std": self.step_scale_prior_std, "prior_std": self.step_scale_prior_std,
                             "calibrated": False}
         self.solver_ = {"method": "levenberg_marquardt", "iterations": 0, "alternations": 0, "final_error": 0.0,
-                        "time_s": 0.0, "marginals_time_s": 0.0, "gnss_used": 0, "gnss_rejected": 0, "converged": True}
+                        "time_s": 0.0, "marginals_time_s": 0.0, "gnss_used": 0, "gnss_rejected": 0, "converged": True,
+                        "last_change_m": 0.0}
         return self
 
     # ------------------------------------------------------------------------------------------------------------
@@ -380,8 +381,10 @@ class FactorGraphFusion(Algorithm):
         regression = step_model is None or isinstance(step_model, RegressionStepLength)
         calibrate = bool(self.calibrate_step_model and regression and observable and problem.features is not None
                          and feats_ok.sum() >= 3)
-        # the steps' own lengths (e.g. per-form models) times one scale, when the regression is not calibrated
-        scale_steps = bool(self.calibrate_step_scale and not calibrate and observable)
+        # the steps' own lengths (per-form models, or a one-parameter model such as Zijlstra's) times one scale
+        own_scale = step_model is not None and not regression and len(getattr(step_model, "theta_names", ())) == 1
+        scale_steps = bool((self.calibrate_step_scale or (self.calibrate_step_model and own_scale))
+                           and not calibrate and observable)
         model_prior = None
         if calibrate:
             if step_model is None:
@@ -414,8 +417,12 @@ class FactorGraphFusion(Algorithm):
         mean_stride = np.bincount(src, problem.stride_length_m, n_src) / np.maximum(np.bincount(src, minlength=n_src), 1)
         scale = np.concatenate([feat_scale, np.full(nb, 0.5 * self.gyro_bias_knot_s ** 2 * mean_speed),
                                 np.full(n_dev, 10.0 * mean_length), mean_stride, [mean_length]])
-        step_scale_std = self.step_scale_prior_std
-        step_scale_prior = StepModelParams(np.ones(1), np.array([[self.step_scale_prior_std ** 2]]), 0.0)
+        scale_prior_std_own = self.step_scale_prior_std
+        if own_scale and step_model.covariance_matrix is not None:  # the model's own prior on its one parameter
+            scale_prior_std_own = float(np.sqrt(step_model.covariance_matrix[0, 0]) / abs(step_model.theta[0]))
+        step_scale_std = scale_prior_std_own
+        step_scale_prior = StepModelParams(np.ones(1), np.array([[scale_prior_std_own ** 2]]), 0.0)
+        nonnegative = tuple(RegressionStepLength.theta_names.index(n) for n in RegressionStepLength.nonnegative)
 
         def unpack(p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
             b = SmoothSeries(bias.t0_s, bias.knot_s, p[i_bias])
@@ -445,7 +452,7 @@ class FactorGraphFusion(Algorithm):
             if calibrate:
                 along = self._along_track(poses)
                 out[:3], cov = solve_step_model(along[feats_ok], problem.features[feats_ok],
-                                                problem.step_length_std_m[feats_ok], model_prior)
+                                                problem.step_length_std_m[feats_ok], model_prior, nonnegative)
             if scale_steps:  # along = k x length + e, prior k ~ N(1, step_scale_prior_std^2)
                 ok = ~problem.gap
                 k, k_cov = solve_step_model(self._along_track(poses)[ok], problem.step_length_m[ok, None],
@@ -462,7 +469,7 @@ class FactorGraphFusion(Algorithm):
                                                                      p[i_scale], self.huber_k)
                 else:
                     theta_new, out[i_scale], scale_std[:] = joint
-                    if calibrate:
+                    if calibrate and all(theta_new[j] >= 0 for j in nonnegative):  # else the bounded closed form
                         out[:3] = theta_new
             return out, cov
 
@@ -514,6 +521,15 @@ class FactorGraphFusion(Algorithm):
             else:
                 params = mapped
             use = new_use
+        last_change_m = float(np.max(np.abs(f), initial=0.0))
+        if not converged and (calibrate or scale_steps):
+            blocks = {"step model": slice(0, 3), "gyro bias": i_bias, "magnetometer deviation": i_dev,
+                      "stride scales": i_scale, "step scale": slice(i_step_scale, i_step_scale + 1)}
+            worst = max(blocks, key=lambda b: np.max(np.abs(f[blocks[b]]), initial=0.0))
+            what = "the GNSS gate still changing" if not same_gate else f"largest in the {worst}"
+            warnings.warn(f"graph fusion: the calibration did not converge in {alternation} alternations (last change "
+                          f"{last_change_m:.3g} m > {self.alternation_tol_m:g} m, {what}); the step model given is kept",
+                          stacklevel=2)
         theta = params[:3]
         bias = SmoothSeries(bias.t0_s, bias.knot_s, params[i_bias])
         t_marg = time.perf_counter()
@@ -529,14 +545,19 @@ class FactorGraphFusion(Algorithm):
         self.gyro_bias_radps_ = bias(problem.epoch_t_s[1:])
         self.mag_deviation_coef_ = params[i_dev].copy()
         self.step_scale_ = {"scale": float(params[i_step_scale]), "std": step_scale_std,
-                            "prior_std": self.step_scale_prior_std, "calibrated": scale_steps}
+                            "prior_std": scale_prior_std_own, "calibrated": scale_steps}
         self.stride_scales_ = {
             str(name): {"scale": float(params[i_scale][q]) if estimate_scales else 1.0,
                         "std": float(scale_std[q]), "prior_std": float(scale_prior_std[q]),
                         "n_strides": int(np.sum(src == q)), "calibrated": estimate_scales}
             for q, name in enumerate(sources)}
         self.mag_deviation_rad_ = deviation_design(poses[1:, 2]) @ self.mag_deviation_coef_
-        if calibrate:
+        if not converged:  # the last good model: the one given
+            self.step_model_ = step_model
+        elif scale_steps and own_scale:
+            k = float(params[i_step_scale])
+            self.step_model_ = step_model.with_theta(step_model.theta * k, np.array([[(step_scale_std * k * step_model.theta[0]) ** 2]]))
+        elif calibrate:
             self.step_model_ = type(step_model)(a_m=float(theta[0]), b_m_per_hz=float(theta[1]),
                                                 c_m_per_m2ps4=float(theta[2]),
                                                 residual_std_m=model_prior.residual_std_m,
@@ -546,6 +567,7 @@ class FactorGraphFusion(Algorithm):
         self.solver_ = {"method": "levenberg_marquardt", "iterations": lm_iterations, "alternations": alternation,
                         "final_error": final_error, "time_s": t_end - t_begin, "marginals_time_s": t_end - t_marg,
                         "gnss_used": int(use.sum()), "gnss_rejected": int((~use).sum()), "converged": converged,
+                        "last_change_m": last_change_m,
                         "gnss_factor": self.gnss_factor, "step_model_calibrated": calibrate,
                         "stride_scales_calibrated": estimate_scales}
         return self

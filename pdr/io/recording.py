@@ -27,6 +27,9 @@ PLACEMENTS = (
 SUBJECT_KEYS = (
     "height_m", "mass_kg", "leg_length_m", "sensor_height_m", "thigh_length_m", "shank_length_m", "foot_length_m",
 )
+SUBJECT_HEIGHT_RANGE_M = (0.9, 2.5)  # a body height in metres (a number above is centimetres or a typo)
+SUBJECT_PART_KEYS = ("leg_length_m", "sensor_height_m", "thigh_length_m", "shank_length_m", "foot_length_m")
+SUBJECT_LEG_PER_HEIGHT_RANGE = (0.40, 0.62)  # standing hip height / height: 0.53 on average (Winter 2009)
 ACC_COLUMNS = ("acc_x_mps2", "acc_y_mps2", "acc_z_mps2")
 GYR_COLUMNS = ("gyr_x_radps", "gyr_y_radps", "gyr_z_radps")
 MAG_COLUMNS = ("mag_x_ut", "mag_y_ut", "mag_z_ut")
@@ -250,6 +253,30 @@ def validate_gnss(df: pd.DataFrame, what: str = "gnss.csv") -> pd.DataFrame:
     return df.reset_index(drop=True)
 
 
+def check_subject(subject: dict[str, Any], what: str = "meta.toml [subject]") -> None:
+    """An InputError (one line) when the ``[subject]`` lengths are not plausible metres of one person: a height in
+    centimetres, a leg longer than the body, a sensor above the head."""
+    height = subject.get("height_m")
+    if height is not None and not SUBJECT_HEIGHT_RANGE_M[0] <= height <= SUBJECT_HEIGHT_RANGE_M[1]:
+        hint = f" (a height in centimetres? write {height / 100:g})" if 90 <= height <= 250 else ""
+        raise InputError(f"{what}: expected height_m in metres ({SUBJECT_HEIGHT_RANGE_M[0]:g}-{SUBJECT_HEIGHT_RANGE_M[1]:g}), "
+                         f"found {height:g}{hint}")
+    for key in SUBJECT_PART_KEYS:
+        value = subject.get(key)
+        if value is None:
+            continue
+        if value >= SUBJECT_HEIGHT_RANGE_M[1]:
+            raise InputError(f"{what}: expected {key} in metres (below {SUBJECT_HEIGHT_RANGE_M[1]:g}), found {value:g} "
+                             f"(in centimetres? write {value / 100:g})")
+        if height is not None and value >= height:
+            part = "a sensor above the head" if key == "sensor_height_m" else f"a {key[:-9].replace('_', ' ')} longer than the body"
+            raise InputError(f"{what}: expected {key} below height_m ({height:g} m), found {value:g} m ({part})")
+    leg = subject.get("leg_length_m")
+    if leg is not None and height is not None and not SUBJECT_LEG_PER_HEIGHT_RANGE[0] <= leg / height <= SUBJECT_LEG_PER_HEIGHT_RANGE[1]:
+        raise InputError(f"{what}: expected leg_length_m (standing hip height) {SUBJECT_LEG_PER_HEIGHT_RANGE[0]:g}-"
+                         f"{SUBJECT_LEG_PER_HEIGHT_RANGE[1]:g} of height_m ({height:g} m), found {leg:g} m")
+
+
 def _validate_meta(meta: dict[str, Any], what: str) -> None:
     rec = meta.get("recording")
     if not isinstance(rec, dict) or "id" not in rec:
@@ -262,6 +289,7 @@ def _validate_meta(meta: dict[str, Any], what: str) -> None:
             raise InputError(f"{what}: expected [subject] keys among {', '.join(SUBJECT_KEYS)}, found {key!r}")
         if not isinstance(value, (int, float)) or not 0 < value < 500:
             raise InputError(f"{what}: expected a positive number for subject.{key}, found {value!r}")
+    check_subject(meta.get("subject", {}), f"{what} [subject]")
     geo = meta.get("geo")
     if geo is not None:
         try:

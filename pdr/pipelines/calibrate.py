@@ -1,11 +1,17 @@
-"""``pdr calibrate REC [REC ...] -o model.json``: the per-user step-length model from the recordings' GNSS.
+"""``pdr calibrate REC [REC ...] -o model.json``: the per-user step-length model from known distances.
 
-Load each recording (``reference/`` is never read), detect its steps, put its GNSS in the local east-north frame,
-run :class:`pdr.calibration.AdaptiveKalmanCalibration` over all of them, and write the calibrated model with how
-many steps and metres of GNSS walking it saw (atomically). Configuration sections: ``[steps]``, ``[heading]``
-(step detection), ``[step_length]`` (the model to calibrate and its prior, default the regression preset),
-``[calibration]`` (AdaptiveKalmanCalibration parameters), ``[gnss]`` (as ``pdr run``: ``mask_intervals_s``,
-``default_h_acc_m``).
+Each recording brings its distances from one source: ``--distance-m D`` (the whole walk was D metres: a measured
+corridor, a track lap), ``--landmarks CSV`` (``t_s, e_m, n_m``: surveyed points passed in turn, walked straight
+between), ``--trajectory CSV`` (``t_s, e_m, n_m``: a reference path, its length over 30 s windows), else its GNSS.
+The k-th ``--distance-m`` / ``--landmarks`` / ``--trajectory`` belongs to the k-th recording (give the walks of known
+length first); the others use their GNSS. ``reference/`` is never read (a file given on the command line is the
+user's own distance information).
+
+Load each recording, detect its steps, take the prior of the person (``[step_length]``, else the body-based model of
+the first recording's ``[subject]`` and placement, :func:`pdr.step_length.body_model`), run
+:class:`pdr.calibration.AdaptiveKalmanCalibration` over all of them, and write the calibrated model with how many
+steps and metres it saw (atomically). Configuration sections: ``[steps]``, ``[heading]`` (step detection),
+``[step_length]``, ``[calibration]`` (AdaptiveKalmanCalibration parameters), ``[gnss]`` (as ``pdr run``).
 """
 
 from __future__ import annotations
@@ -13,47 +19,89 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 
 from pdr.calibration import AdaptiveKalmanCalibration
+from pdr.calibration.segments import landmark_distances, trajectory_distances
 from pdr.config import load_config
 from pdr.errors import InputError
-from pdr.io.recording import load_recording
+from pdr.io.recording import load_recording, read_csv
 from pdr.pipelines.run import gnss_local, gnss_settings
 from pdr.pipelines.steps import detect_steps
-from pdr.step_length import model_from_config, save_model
+from pdr.step_length import choose_model, save_model
+
+KNOWN_DISTANCE_REL_STD = 0.01  # a walk "of known length" follows its measured line to about 1%
+LANDMARK_POSITION_STD_M = 0.3  # a landmark passing: the click lags the passing by ~0.2 s at ~1.5 m/s
+TRAJECTORY_POSITION_STD_M = 0.05  # a reference system (motion capture, RTK, a surveyed path)
+TRAJECTORY_SEGMENT_S = 30.0
 
 
-def calibrate_recordings(recs: list[Path], out: Path, config_path=None) -> str:
+def known_distances(n_recs: int, distance_m: list[float] | None = None, landmarks: list[Path] | None = None,
+                    trajectory: list[Path] | None = None) -> list[tuple[str, pd.DataFrame | None]]:
+    """Per recording: the source of its distances (``"distance"``, ``"landmarks"``, ``"trajectory"``, ``"gnss"``) and
+    the table of known distances (None for GNSS)."""
+    out: list[tuple[str, pd.DataFrame | None]] = [("gnss", None)] * n_recs
+    given = {"--distance-m": distance_m or [], "--landmarks": landmarks or [], "--trajectory": trajectory or []}
+    for flag, values in given.items():
+        if len(values) > n_recs:
+            raise InputError(f"calibrate: expected at most one {flag} per recording ({n_recs}), found {len(values)}")
+        for k, value in enumerate(values):
+            if out[k][0] != "gnss":
+                raise InputError(f"calibrate: expected one distance source per recording, found {out[k][0]} and "
+                                 f"{flag} for recording {k + 1}")
+            if flag == "--distance-m":
+                if not (np.isfinite(value) and value > 0):
+                    raise InputError(f"calibrate: expected --distance-m > 0 (metres walked), found {value}")
+                table = pd.DataFrame({"t_start_s": [np.nan], "t_end_s": [np.nan], "distance_m": [float(value)],
+                                      "distance_std_m": [KNOWN_DISTANCE_REL_STD * float(value)]})
+                out[k] = ("distance", table)
+            elif flag == "--landmarks":
+                out[k] = ("landmarks", landmark_distances(read_csv(Path(value)), LANDMARK_POSITION_STD_M))
+            else:
+                out[k] = ("trajectory", trajectory_distances(read_csv(Path(value)), TRAJECTORY_SEGMENT_S,
+                                                             TRAJECTORY_POSITION_STD_M))
+    return out
+
+
+def calibrate_recordings(recs: list[Path], out: Path, config_path=None, *, distance_m: list[float] | None = None,
+                         landmarks: list[Path] | None = None, trajectory: list[Path] | None = None) -> str:
     """Calibrate the step model on ``recs`` and write it to ``out``; return a one-line summary."""
     if not recs:
         raise InputError("calibrate: expected at least one recording, found none")
     config = load_config(config_path)
-    model = model_from_config(config)
     akf = AdaptiveKalmanCalibration.from_config(config.get("calibration"))
     settings = gnss_settings(config)
+    sources = known_distances(len(recs), distance_m, landmarks, trajectory)
     recordings = [load_recording(Path(r), with_reference=False) for r in recs]
-    without = [str(r.path) for r in recordings if r.gnss is None]
+    without = [str(r.path) for r, (kind, _) in zip(recordings, sources) if kind == "gnss" and r.gnss is None]
     if without:
-        raise InputError(f"calibrate: calibration needs GNSS (gnss.csv) in every recording, found none in {', '.join(without)}")
+        raise InputError(f"calibrate: expected GNSS (gnss.csv) or a known distance (--distance-m, --landmarks, "
+                         f"--trajectory) for every recording, found neither for {', '.join(without)}")
+    model, choice = choose_model(config, recordings[0].subject, recordings[0].placement)
     steps_list, gnss_list, subjects = [], [], []
-    for rec in recordings:
+    for rec, (kind, _) in zip(recordings, sources):
         steps = model.prepare(detect_steps(rec, config), rec)
-        gnss = gnss_local(rec, settings)
-        gnss.loc[gnss["masked"], ["e_m", "n_m"]] = np.nan
+        gnss = None
+        if kind == "gnss":
+            gnss = gnss_local(rec, settings)
+            gnss.loc[gnss["masked"], ["e_m", "n_m"]] = np.nan
+            gnss = gnss.drop(columns="masked")
         steps_list.append(steps)
-        gnss_list.append(gnss.drop(columns="masked"))
+        gnss_list.append(gnss)
         subjects.append(rec.subject)
-    akf.fit(steps_list, gnss_list, model, subjects)
+    akf.fit(steps_list, gnss_list, model, subjects, distances=[table for _, table in sources])
     segs = akf.model_segments_
     if akf.updated_ == "none":
         reasons = segs.loc[~segs["used"], "reason"].value_counts().to_dict() if len(segs) else {}
-        found = ", ".join(f"{n} {why}" for why, n in reasons.items()) or "no GNSS fix inside a walking bout"
-        raise InputError(f"calibrate: expected GNSS segments of walking (usable fixes, steps, straight path), found none "
+        found = ", ".join(f"{n} {why}" for why, n in reasons.items()) or "no GNSS fix or known distance inside a walking bout"
+        raise InputError(f"calibrate: expected segments of walking of known length (GNSS fixes, distances), found none "
                          f"usable in {len(recordings)} recording(s): {found}")
     save_model(akf.model_, out, n_steps=int(round(akf.n_steps_)), distance_m=round(akf.distance_m_, 2), n_segments=int(segs["used"].sum()),
                n_segments_rejected=int((~segs["used"]).sum()), updated=akf.updated_,
-               recordings=[rec.id for rec in recordings], calibration=akf.get_params())
+               recordings=[rec.id for rec in recordings], sources=[kind for kind, _ in sources], prior=choice,
+               calibration=akf.get_params())
     params = ", ".join(f"{n}={getattr(akf.model_, n):.4g}" for n in akf.model_.theta_names)
-    what = "all parameters" if akf.updated_ == "all" else f"{akf.updated_} only (one walking frequency)"
-    return (f"calibrated {akf.model_.name} model on {len(recordings)} recording(s): {akf.n_steps_:.0f} steps, "
-            f"{akf.distance_m_:.1f} m of GNSS walking in {int(segs['used'].sum())} segments, {what}: {params} -> {out}")
+    what = "all parameters" if akf.updated_ == "all" else "mainly the level (one walking frequency)"
+    kinds = ", ".join(sorted({kind for kind, _ in sources}))
+    return (f"calibrated {akf.model_.name} model on {len(recordings)} recording(s) ({kinds}): {akf.n_steps_:.0f} steps, "
+            f"{akf.distance_m_:.1f} m of walking in {int(segs['used'].sum())} segments, {what}: {params} -> {out}")

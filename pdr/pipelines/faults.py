@@ -10,9 +10,9 @@ with null times and sensor.
 Widening (the trajectory stays one continuous chain of poses; only the weights change):
 
 - a step whose interval (previous contact to its contact) meets a gap, or a stuck, saturated, duplicated or
-  resampled accelerometer: its length is known to ``FAULT_LENGTH_STD_FRACTION`` of itself at best; a step over a
-  gap longer than the fusion's ``max_step_duration_s`` is already a *gap step* there (displacement known only to a
-  walking speed times its duration);
+  resampled accelerometer: its length is known to ``FAULT_LENGTH_STD_FRACTION`` of a typical step (the median of the
+  others) at best; a step over a gap longer than the fusion's ``max_step_duration_s`` is already a *gap step* there
+  (displacement known only to a walking speed times its duration);
 - ... meets a gap or a faulty gyroscope: its heading change is known to ``FAULT_HEADING_CHANGE_STD_RAD`` at best;
 - ... meets a magnetic disturbance: no magnetic heading;
 - GNSS fixes that jumped are not used (as if masked).
@@ -63,7 +63,10 @@ def widen_steps(steps: pd.DataFrame, faults: pd.DataFrame, t_start_s: float) -> 
     if length_hit.any():
         length = steps["step_length_m"].to_numpy(float)
         std = steps["step_length_std_m"].to_numpy(float)
-        steps["step_length_std_m"] = np.where(length_hit, np.fmax(std, FAULT_LENGTH_STD_FRACTION * length), std)
+        # of a typical step: a faulty signal can make a signal-based model's length itself small (a stuck accelerometer
+        # has no vertical excursion)
+        typical = float(np.median(length[~length_hit])) if (~length_hit).any() else float(np.median(length))
+        steps["step_length_std_m"] = np.where(length_hit, np.fmax(std, FAULT_LENGTH_STD_FRACTION * typical), std)
     heading_hit = touched(imu_faults[imu_faults["sensor"].isin(HEADING_SENSORS)])
     if heading_hit.any() and "heading_change_std_rad" in steps.columns:
         std = steps["heading_change_std_rad"].to_numpy(float)

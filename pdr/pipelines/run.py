@@ -44,7 +44,7 @@ from pdr.report import (
     write_trajectory_csv,
     write_tum,
 )
-from pdr.step_length import load_model, model_from_config
+from pdr.step_length import choose_model
 
 STEP_SOURCE = "accelerometer"
 GNSS_KEYS = ("mask_intervals_s",)
@@ -177,7 +177,7 @@ def run_recording(rec: Path, out: Path, *, config_path=None, model_path=None, us
         config = load_config(config_path)
         settings = gnss_settings(config)
         method, fusion = make_fusion(config.get("fusion"))
-        model = load_model(model_path) if model_path is not None else model_from_config(config)
+        model, model_choice = choose_model(config, recording.subject, recording.placement, model_path)
         lap("load_s")
 
         steps = detect_steps(recording, config).reset_index(drop=True)
@@ -243,7 +243,7 @@ def run_recording(rec: Path, out: Path, *, config_path=None, model_path=None, us
         valid = np.isfinite(gnss["e_m"].to_numpy()) & np.isfinite(gnss["n_m"].to_numpy())
         gnss_counts = {"fixes": len(gnss), "valid": int(valid.sum()), "masked": int((gnss["masked"] & valid).sum()),
                        "jumped": int((gnss_suspect & valid).sum()), "used": int(gnss_used.sum())}
-    step_model = {"model": type(model).__name__, "params": model.get_params()}
+    step_model = {"model": type(model).__name__, "params": model.get_params(), "choice": model_choice}
     summary: dict[str, Any] = {
         "recording_id": recording.id,
         "distance_m": distance,

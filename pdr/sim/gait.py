@@ -4,12 +4,15 @@ The legs move by sagittal joint angles (hip, knee, ankle) given as Fourier serie
 step length, with a speed-dependent stance fraction (about 60% of the cycle at a normal pace, less when faster, a
 flight phase when running). The pelvis travels the planned steps with a within-step speed fluctuation and an
 inverted-pendulum height; a swing leg follows the curves, a stance foot rolls on a rocker sole without slipping
-and its leg reaches it by inverse kinematics. Speed, step frequency and step length come from a per-user
-walk-ratio law and per-step variability, never from the step-length regression the estimator fits.
+and its leg reaches it by inverse kinematics. Speed, step frequency and step length come from a per-person
+speed-step-length law that is not linear in frequency (:class:`GaitUser`), with individual offsets, body proportions,
+cohorts (healthy, older, impaired slow gait) and per-step variability, never from the step-length models the
+estimator fits.
 
 Public objects
 --------------
-``Body`` (segment lengths from height), ``GaitUser`` (per-user coefficients), ``plan_walk`` (heel-strike instants
+``Body`` (segment lengths from height and leg proportion), ``GaitUser`` (per-person coefficients, :data:`COHORTS`),
+``plan_walk`` (heel-strike instants
 and target step lengths from speed segments), ``WalkKinematics`` (positions and rotations at any time).
 
 Frames: world = local east-north-up (m). Segment frames: ``pelvis`` and ``foot_*``: x forward, y left, z up;
@@ -94,20 +97,25 @@ def _warp(p: np.ndarray, stance: np.ndarray, curve_toe_off: float) -> np.ndarray
 
 @dataclasses.dataclass(frozen=True)
 class Body:
-    """Segment lengths from body height (Winter's ratios).
+    """Segment lengths from body height (Winter's ratios) and a per-person leg proportion.
 
     Attributes: ``thigh_m``, ``shank_m``, ``foot_m`` (heel to toe), ``ankle_height_m``, ``hip_separation_m``,
-    ``leg_length_m`` (standing hip height = thigh + shank + ankle height, about 0.53 H).
+    ``leg_length_m`` (standing hip height = thigh + shank + ankle height, about 0.53 H). ``leg_scale`` multiplies
+    thigh and shank: people of one height differ in relative leg length by about 2.5% (1 SD; Bogin & Varela-Silva
+    2010, "Leg length, body proportion, and health").
     """
 
     height_m: float = 1.75
+    leg_scale: float = 1.0
 
     def __post_init__(self):
         if not 1.0 <= self.height_m <= 2.3:
             raise InputError(f"subject.height_m: expected 1.0-2.3 m, found {self.height_m}")
+        if not 0.85 <= self.leg_scale <= 1.15:
+            raise InputError(f"subject leg_scale: expected 0.85-1.15, found {self.leg_scale}")
 
-    thigh_m = property(lambda self: THIGH_RATIO * self.height_m)
-    shank_m = property(lambda self: SHANK_RATIO * self.height_m)
+    thigh_m = property(lambda self: THIGH_RATIO * self.leg_scale * self.height_m)
+    shank_m = property(lambda self: SHANK_RATIO * self.leg_scale * self.height_m)
     foot_m = property(lambda self: FOOT_RATIO * self.height_m)
     ankle_height_m = property(lambda self: ANKLE_HEIGHT_RATIO * self.height_m)
     hip_separation_m = property(lambda self: HIP_SEPARATION_RATIO * self.height_m)
@@ -122,19 +130,51 @@ class Body:
         return {k: round(v, 4) for k, v in out.items()}
 
 
+LEG_SCALE_SD = 0.025  # relative leg length, 1 SD (Bogin & Varela-Silva 2010)
+
+
+@dataclasses.dataclass(frozen=True)
+class Cohort:
+    """How a group walks relative to healthy adults: factors on the step length at a given dimensionless speed, on
+    the per-step variability (length and duration), and on the vertical excursion of the pelvis."""
+
+    length_factor: float = 1.0
+    variability_factor: float = 1.0
+    arc_factor: float = 1.0
+
+
+COHORTS = {
+    # healthy adults: the reference
+    "healthy": Cohort(),
+    # older adults: about 10% shorter steps at the same speed, 30% more step-to-step variability (Winter et al. 1990,
+    # "Biomechanical walking pattern changes in the fit and healthy elderly"; Hausdorff 2005, gait variability)
+    "older": Cohort(length_factor=0.90, variability_factor=1.3),
+    # impaired slow gait (multiple sclerosis, Parkinson's, after stroke; scenarios at 0.4-0.9 m/s): about 20% shorter
+    # steps at the same speed, the cadence carrying more of the speed (Comber, Galvin & Coote 2017, meta-analysis of
+    # gait in MS), twice the step-to-step variability (Hausdorff 2005), and a 7% larger pelvis excursion for a given
+    # step: the inverted-pendulum factor fitted on people with MS is 4.587/4 against 4.739/4 for all participants
+    # (Soltani et al. 2021), and (4.739 / 4.587)^2 = 1.07
+    "impaired": Cohort(length_factor=0.80, variability_factor=2.0, arc_factor=1.07),
+}
+
+
 @dataclasses.dataclass(frozen=True)
 class GaitUser:
-    """Per-user gait coefficients (drawn once per simulated person).
+    """Per-person gait coefficients (drawn once per simulated person).
 
-    Step length follows a Froude-scaled walk-ratio law: L / l = c (v_hat / v_ref) ** beta with the dimensionless
-    speed v_hat = v / sqrt(g l) (l = leg length, v_ref = 0.45, about 1.35 m/s for an adult;
-    Grieve & Gear 1966, Sekiya & Nagasaki 1998: step length ~ sqrt(speed), a near-constant walk ratio), and
-    frequency f = v / L. Per-step variability of length has a coefficient of variation ``cv_slow`` at 0.6 m/s
-    falling to ``cv_fast`` at 1.7 m/s and above (Ladetto et al. 2000 observed about 15% and 4%).
+    Step length follows a Froude-scaled power law of speed: L / l = c (v_hat / v_ref) ** beta with the dimensionless
+    speed v_hat = v / sqrt(g l) (l = leg length, v_ref = 0.45, about 1.35 m/s for an adult). The exponent beta = 0.42
+    is the preferred speed-step length relation of humans (Grieve 1968; Kuo 2001, "A simple model of bipedal walking
+    predicts the preferred speed-step length relationship"), so with f = v / L the step length grows as
+    f ** (beta / (1 - beta)) = f ** 0.72: concave in frequency, not a line, and each person has their own c and beta
+    (5% and 0.04 SD: individual offsets and curvature). Per-step variability of length has a coefficient of variation
+    ``cv_slow`` at 0.6 m/s falling to ``cv_fast`` at 1.7 m/s and above (Ladetto et al. 2000 observed about 15% and
+    4%). ``arc_gain`` is the pelvis vertical excursion over the compass-gait arc: measured centre-of-mass excursions
+    of 2.7 cm at 0.7 m/s to 4.8 cm at 1.6 m/s (Orendurff et al. 2004) are 0.5-0.65 of the arc; per person N(0.6, 0.04).
     """
 
     length_coef: float = 0.78  # step length / leg length at the reference speed
-    length_exponent: float = 0.5
+    length_exponent: float = 0.42
     cv_slow: float = 0.15
     cv_fast: float = 0.04
     cv_time: float = 0.02  # independent step-duration jitter
@@ -143,16 +183,27 @@ class GaitUser:
     pelvic_rotation_deg: float = 4.0
     obliquity_deg: float = 3.5
     pitch_deg: float = 1.5
+    arc_gain: float = 0.6  # pelvis vertical excursion / compass-gait arc
+    cohort: str = "healthy"
 
     @classmethod
-    def draw(cls, rng: np.random.Generator, *, cv_slow: float = 0.15, cv_fast: float = 0.04) -> "GaitUser":
-        """A random adult (population spreads of the coefficients)."""
+    def draw(cls, rng: np.random.Generator, *, cv_slow: float = 0.15, cv_fast: float = 0.04,
+             cohort: str = "healthy") -> "GaitUser":
+        """A random person of ``cohort`` (population spreads of the coefficients)."""
+        if cohort not in COHORTS:
+            raise InputError(f"subject.cohort: expected one of {', '.join(COHORTS)}, found {cohort!r}")
+        group = COHORTS[cohort]
         z = rng.standard_normal(8)
-        return cls(length_coef=float(0.78 * (1 + 0.05 * z[0])), length_exponent=float(np.clip(0.5 + 0.05 * z[1], 0.38, 0.62)),
-                   cv_slow=cv_slow, cv_fast=cv_fast, step_width_m=float(np.clip(0.10 + 0.02 * z[2], 0.05, 0.16)),
+        extra = rng.standard_normal(1)
+        v = group.variability_factor
+        return cls(length_coef=float(0.78 * group.length_factor * (1 + 0.05 * z[0])),
+                   length_exponent=float(np.clip(0.42 + 0.04 * z[1], 0.32, 0.52)),
+                   cv_slow=cv_slow * v, cv_fast=cv_fast * v, cv_time=0.02 * v,
+                   step_width_m=float(np.clip(0.10 + 0.02 * z[2], 0.05, 0.16)),
                    sway_m=float(np.clip(0.025 + 0.006 * z[3], 0.01, 0.04)),
                    pelvic_rotation_deg=float(np.clip(4.0 + 1.0 * z[4], 1.5, 7.0)),
-                   obliquity_deg=float(np.clip(3.5 + 0.8 * z[5], 1.5, 6.0)), pitch_deg=float(np.clip(1.5 + 0.4 * z[6], 0.5, 3.0)))
+                   obliquity_deg=float(np.clip(3.5 + 0.8 * z[5], 1.5, 6.0)), pitch_deg=float(np.clip(1.5 + 0.4 * z[6], 0.5, 3.0)),
+                   arc_gain=float(np.clip(group.arc_factor * (0.6 + 0.04 * extra[0]), 0.4, 0.75)), cohort=cohort)
 
     def step_length_m(self, speed_mps, leg_length_m: float):
         v_hat = np.maximum(np.asarray(speed_mps, float), 0.05) / np.sqrt(GRAVITY_MPS2 * leg_length_m)
@@ -252,7 +303,6 @@ SPEED_FLUCTUATION = 0.08  # forward speed fluctuation within a step, fraction of
 TOUCH_DOWN_PHASE = 0.06  # fraction of the cycle over which a landing foot settles onto its footprint
 LIFT_OFF_PHASE = 0.12
 WALK_DROP_M = 0.02  # mean lowering of the hip in mid stance (knee flexion), walking
-WALK_ARC_GAIN = 0.6  # vertical excursion / compass-gait arc (Saunders et al. 1953: the determinants halve it)
 WALK_LOW_PHASE = 0.04  # the pelvis is lowest this fraction of a stride after heel strike
 RUN_DROP_M = 0.05  # running: knee flexion of ~40 deg in mid stance
 RUN_ARC_GAIN = 0.4  # running vertical excursion ~7-9 cm (Cavanagh & Lafortune 1980)
@@ -313,7 +363,8 @@ class WalkKinematics:
     The pelvis moves along the route by a C2 spline through its positions at the heel strikes (spaced by the
     planned step lengths), with a within-step speed fluctuation (fastest at heel strike, slowest in mid stance)
     and a heel-strike transient. Its height follows an inverted-pendulum arc (compass-gait excursion
-    l - sqrt(l^2 - (L/2)^2) scaled by 0.6 for the determinants of gait; lowest just after heel strike), or when
+    l - sqrt(l^2 - (L/2)^2) scaled by the person's ``arc_gain`` for the determinants of gait; lowest just after heel
+    strike), or when
     running is lowest in mid stance and highest in flight. Pelvic rotation, obliquity and tilt oscillate with the
     gait phase. Joint angles are Fourier series of normative walking and running curves (constants above),
     blended by speed, phase-warped to the stance fraction, and scaled about the standing posture by the step
@@ -537,7 +588,7 @@ class WalkKinematics:
         arc = l - np.sqrt(np.maximum(l * l - (0.5 * step) ** 2, 0.25 * l * l))
         w_run = run_weight(st["speed"])
         stance = stance_fraction(st["speed"])
-        walk = WALK_DROP_M + WALK_ARC_GAIN * arc * 0.5 * (1.0 + np.cos(4 * np.pi * (ph - WALK_LOW_PHASE)))
+        walk = WALK_DROP_M + self.user.arc_gain * arc * 0.5 * (1.0 + np.cos(4 * np.pi * (ph - WALK_LOW_PHASE)))
         run = RUN_DROP_M + RUN_ARC_GAIN * arc * 0.5 * (1.0 + np.cos(4 * np.pi * ph - 2 * np.pi * stance))
         return b.leg_length_m - e * ((1 - w_run) * walk + w_run * run) + _impact(st)
 

@@ -20,6 +20,16 @@ from pdr.constants import GRAVITY_MPS2
 from pdr.errors import InputError
 from pdr.sim.gait import WalkKinematics, rotation_zyx
 
+WAIST_ABOVE_HIP_PER_HEIGHT = 0.08  # lower-back sensor height minus hip height, per body height (see below)
+
+
+def waist_sensor_above_hip_m(body) -> float:
+    """Height of a lower-back (L4-L5) sensor above the hip joints: 0.08 H. The Mobilise-D lab participants' measured
+    sensor heights are 0.61-0.62 of their height (mobgap example data, ``infoForAlgo.mat`` SensorHeight / Height),
+    the hip joints 0.53 H (Winter 2009)."""
+    return WAIST_ABOVE_HIP_PER_HEIGHT * body.height_m
+
+
 IMU_PLACEMENTS = ("waist", "pocket", "hand", "foot_left", "foot_right", "shank_left", "shank_right")
 G_WORLD = np.array([0.0, 0.0, -GRAVITY_MPS2])
 CHUNK_SAMPLES = 20000
@@ -90,7 +100,8 @@ class SensorPose:
         place = spec.placement
         if place == "waist":
             rot = kin.segment_rotation(t, "pelvis")
-            return kin.pelvis_position_m(t) + rot @ np.array([-0.10, 0.0, 0.0]), rot  # on the sacrum
+            # on the lower back (L4-L5, a belt): behind and above the hip joints
+            return kin.pelvis_position_m(t) + rot @ np.array([-0.10, 0.0, waist_sensor_above_hip_m(kin.body)]), rot
         if place == "hand":
             rng = np.random.default_rng(self._sway_seed)
             psi = kin.route.heading_rad(kin.pelvis_state(t)["s_m"])

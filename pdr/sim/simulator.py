@@ -3,7 +3,10 @@
 Scenario keys (TOML; every table but ``[[segment]]`` and ``[route]`` is optional; unknown keys are errors):
 
 ``[simulation]`` ``id`` (recording id; default the file name), ``description``.
-``[subject]`` ``height_m`` (default: drawn, 1.60-1.90 m), ``mass_kg``.
+``[subject]`` ``height_m`` (default: drawn, 1.60-1.90 m), ``mass_kg``, ``cohort`` (``healthy``, ``older``, ``impaired``;
+    default healthy; :data:`pdr.sim.gait.COHORTS`). The person's leg proportion, step-length law and pelvis excursion
+    are drawn per seed (:class:`pdr.sim.gait.GaitUser`); ``meta.toml`` ``[subject]`` gets what a user would measure:
+    the height, the leg length and (waist IMU) the sensor height, each to +-1 cm (:data:`MEASURE_STD_M`).
 ``[geo]`` ``origin_lat_deg``, ``origin_lon_deg`` (default 46.5191, 6.5668), ``origin_alt_m`` (default 400).
 ``[route]`` ``waypoints_m`` ([[east, north], ...], the polyline walked), ``loop`` (repeat it, closed, as long as
     needed; default true), ``grades`` (slope per leg, rise/run; default flat), ``turn_smoothing_m`` (default 0.8).
@@ -43,16 +46,16 @@ from pdr.gait.mechanics import bout_table, step_energies, step_intervals
 from pdr.geo import en_to_latlon
 from pdr.io.recording import Recording, save_recording
 from pdr.io.tomlio import read_toml
-from pdr.sim.gait import Body, GaitUser, WalkKinematics, plan_walk
+from pdr.sim.gait import LEG_SCALE_SD, Body, GaitUser, WalkKinematics, plan_walk
 from pdr.sim.gnss import GnssSpec, simulate_gnss
 from pdr.sim.route import Route
-from pdr.sim.sensors import ImuSpec, MagneticField, place_steel, synthesize_imu
+from pdr.sim.sensors import ImuSpec, MagneticField, place_steel, synthesize_imu, waist_sensor_above_hip_m
 
 SECTIONS = ("simulation", "subject", "geo", "route", "segment", "imu", "gnss", "magnetic", "barometer", "gait", "camera",
             "fault", "faults")
 KEYS = {
     "simulation": {"id": str, "description": str},
-    "subject": {"height_m": float, "mass_kg": float},
+    "subject": {"height_m": float, "mass_kg": float, "cohort": str},
     "geo": {"origin_lat_deg": float, "origin_lon_deg": float, "origin_alt_m": float},
     "route": {"waypoints_m": list, "loop": bool, "grades": list, "turn_smoothing_m": float},
     "segment": {"duration_s": float, "speed_mps": float, "indoor": bool, "label": str},
@@ -65,7 +68,8 @@ TRAJECTORY_RATE_HZ = 10.0
 MECHANICS_RATE_HZ = 100.0  # pelvis samples per second for the reference mechanics (reference/bouts.csv)
 DEFAULT_ORIGIN = (46.5191, 6.5668, 400.0)
 # fixed sub-stream keys of the seed
-_RNG_PERSON, _RNG_STEPS, _RNG_GNSS, _RNG_STEEL, _RNG_BARO, _RNG_CAMERA, _RNG_IMU = 1, 2, 3, 4, 5, 6, 10
+_RNG_PERSON, _RNG_STEPS, _RNG_GNSS, _RNG_STEEL, _RNG_BARO, _RNG_CAMERA, _RNG_MEASURE, _RNG_IMU = 1, 2, 3, 4, 5, 6, 7, 10
+MEASURE_STD_M = 0.01  # a tape-measured body length or sensor height
 
 
 def _typed(section: str, table: dict, spec: dict[str, type]) -> dict:
@@ -191,8 +195,9 @@ def build_walk(sc: Scenario, seed: int) -> WalkKinematics:
     """The person, the route and the walk of a scenario (the body kinematics every sensor is made from)."""
     rng_person = np.random.default_rng([seed, _RNG_PERSON])
     height = float(sc.subject.get("height_m", np.clip(rng_person.normal(1.74, 0.08), 1.6, 1.9)))
-    body = Body(height)
-    user = GaitUser.draw(rng_person, cv_slow=float(sc.gait.get("cv_slow", 0.15)), cv_fast=float(sc.gait.get("cv_fast", 0.04)))
+    user = GaitUser.draw(rng_person, cv_slow=float(sc.gait.get("cv_slow", 0.15)), cv_fast=float(sc.gait.get("cv_fast", 0.04)),
+                         cohort=str(sc.subject.get("cohort", "healthy")))
+    body = Body(height, leg_scale=float(np.clip(1.0 + LEG_SCALE_SD * rng_person.standard_normal(), 0.9, 1.1)))
     bouts = plan_walk([(float(s["duration_s"]), float(s["speed_mps"])) for s in sc.segments], user, body,
                       np.random.default_rng([seed, _RNG_STEPS]))
     if not bouts:
@@ -252,6 +257,9 @@ def _reference(kin: WalkKinematics, sc: Scenario, gnss_truth: pd.DataFrame | Non
         "height_m": float(kin.body.height_m),
         "step_length_coef": float(kin.user.length_coef),
         "step_length_exponent": float(kin.user.length_exponent),
+        "cohort": kin.user.cohort,
+        "leg_length_m": float(kin.body.leg_length_m),
+        "pelvis_arc_gain": float(kin.user.arc_gain),
         "distance_definition": "sum of step_length_m: horizontal pelvis distance between consecutive foot contacts",
     }
     if gnss_truth is not None:
@@ -330,8 +338,11 @@ def simulate(scenario: dict[str, Any], seed: int, *, workdir: Path | None = None
         reference["gnss_truth"] = gnss_truth
     main = sc.imus[0].placement
     subject = kin.body.subject(sc.subject.get("mass_kg"))
-    if main == "waist":
-        subject["sensor_height_m"] = round(kin.body.leg_length_m, 4)
+    rng_measure = np.random.default_rng([seed, _RNG_MEASURE])
+    subject["leg_length_m"] = round(kin.body.leg_length_m + MEASURE_STD_M * rng_measure.standard_normal(), 3)
+    if main == "waist":  # the sensor rides on the lower back, above the hip joints
+        sensor = kin.body.leg_length_m + waist_sensor_above_hip_m(kin.body)
+        subject["sensor_height_m"] = round(sensor + MEASURE_STD_M * rng_measure.standard_normal(), 3)
     meta = {"recording": {"id": sc.id, "placement": main, "source": "pdr simulate", "seed": int(seed)},
             "subject": subject,
             "geo": {"origin_lat_deg": origin[0], "origin_lon_deg": origin[1]}}

@@ -33,6 +33,11 @@ from pdr.step_length.features import with_signal_features
 MAX_STEP_M = 2.0  # a longer "step" is a model blow-up (a sprint step is ~1.5 m): clipped, with a warning
 LEG_LENGTH_PER_HEIGHT = 0.53  # greater-trochanter height / body height (Winter, Biomechanics of Human Movement, 2009)
 MAX_FREQ_HZ = 6.0  # faster than any human cadence: the column is not a step frequency in Hz
+POPULATION_HEIGHT_M = 1.70  # adult stature, both sexes (NCD-RisC 2016, Europe / North America: men ~1.77, women ~1.64)
+HEIGHT_STEP_RATIO = 0.414  # step length / body height at a normal cadence (pedometer rule: 0.415 men, 0.413 women)
+REFERENCE_CADENCE_HZ = 110.0 / 60.0  # a normal adult cadence (100-120 steps/min)
+LEVEL_REL_STD = 0.08  # prior spread of a person's step length at a given height and cadence
+SLOPE_REL_STD = 0.30  # prior spread of the cadence slope, relative to its value
 
 
 class StepLengthModel(Algorithm):
@@ -41,6 +46,7 @@ class StepLengthModel(Algorithm):
     name: ClassVar[str] = ""
     required_columns: ClassVar[tuple[str, ...]] = ()
     theta_names: ClassVar[tuple[str, ...]] = ()
+    nonnegative: ClassVar[tuple[str, ...]] = ()  # parameters a calibration holds at >= 0
     preset: ClassVar[dict[str, Any]] = {}
 
     # ------------------------------------------------------------------ parameters
@@ -189,6 +195,19 @@ def _standardised(x: np.ndarray) -> np.ndarray:
     return x / np.where(norm > 0, norm, 1.0)
 
 
+def height_cadence_params(height_m: float) -> dict[str, Any]:
+    """Parameters and prior covariance of :class:`RegressionStepLength` for a person ``height_m`` tall: step length
+    ``HEIGHT_STEP_RATIO * height`` at ``REFERENCE_CADENCE_HZ``, proportional to the cadence (constant walk ratio)."""
+    level = HEIGHT_STEP_RATIO * float(height_m)
+    f0 = REFERENCE_CADENCE_HZ
+    b = level / f0
+    s_level, s_b = LEVEL_REL_STD * level, SLOPE_REL_STD * b
+    return {"a_m": 0.0, "b_m_per_hz": round(b, 6), "c_m_per_m2ps4": 0.0, "residual_std_m": 0.07,
+            "covariance": [[s_level ** 2 + (f0 * s_b) ** 2, -f0 * s_b ** 2, 0.0],
+                           [-f0 * s_b ** 2, s_b ** 2, 0.0],
+                           [0.0, 0.0, 0.01 ** 2]]}
+
+
 class RegressionStepLength(StepLengthModel):
     """Step length = A + B * step frequency + C * acceleration variance (Ladetto et al. 2000, eq. 1).
 
@@ -208,28 +227,34 @@ class RegressionStepLength(StepLengthModel):
     Notes
     -----
     Ladetto, Gabaglio, Merminod, Terrier, Schutz (2000), "Human walking analysis assisted by DGPS", eq. (1); A, B, C by
-    linear least squares, with their covariance ``s^2 (X^T X)^-1``. The population preset (a user never calibrated)
-    is the walk ratio of healthy adults, step length / cadence = 0.0064 m per step/min (Sekiya & Nagasaki 1998,
-    constant over walking speeds), i.e. A = 0, B = 0.0064 * 60 = 0.384 m/Hz, C = 0, with a prior covariance wide
-    enough for GNSS calibration to move it (the length at 1.8 Hz to 0.07 m, B to 0.08 m/Hz, C to 0.01 m/(m/s²)²)
-    and 7 cm per-step scatter (Ladetto et al.: 3-11 cm depending on cadence).
+    linear least squares, with their covariance ``s^2 (X^T X)^-1``. For a user never calibrated, the length comes
+    from the body height H and the cadence (:meth:`for_height`): a step of 0.414 H at 110 steps/min (the pedometer
+    rule of 41.5% / 41.3% of the height for men / women, at a normal cadence in the middle of the adults' 100-120
+    steps/min) and a walk ratio (step length / cadence) constant over walking speeds (Sekiya & Nagasaki 1998), i.e.
+    A = 0, B = 0.414 H / 1.833 Hz = 0.226 H per Hz, C = 0. Its prior covariance: the level at 110 steps/min known to
+    8% (people of one height differ), the slope B to 30% (a negative slope is 3.3 sigma away), C to 0.01 m/(m/s²)²;
+    7 cm per-step scatter (Ladetto et al.: 3-11 cm depending on cadence). The population preset is that model at
+    the population height (:data:`POPULATION_HEIGHT_M`, 1.70 m), B = 0.3839 m/Hz, which is also the walk ratio of Sekiya &
+    Nagasaki's adults (0.0064 m per step/min = 0.384 m/Hz).
 
     Example
     -------
     >>> model = RegressionStepLength.population()
     >>> model.estimate(pd.DataFrame({"step_freq_hz": [1.8], "acc_var_m2ps4": [4.0]})).step_length_m_
-    array([0.6912])
+    array([0.691...])
     """
 
     name = "regression"
     required_columns = ("step_freq_hz", "acc_var_m2ps4")
     theta_names = ("a_m", "b_m_per_hz", "c_m_per_m2ps4")
     typical_features = {"step_freq_hz": 1.8, "acc_var_m2ps4": 4.0}
-    # prior: the length at 1.8 Hz known to 0.07 m (population spread), the slope B to 0.08 m/Hz, C to 0.01
-    preset = {"a_m": 0.0, "b_m_per_hz": 0.384, "c_m_per_m2ps4": 0.0, "residual_std_m": 0.07,
-              "covariance": [[0.07 ** 2 + (1.8 * 0.08) ** 2, -1.8 * 0.08 ** 2, 0.0],
-                             [-1.8 * 0.08 ** 2, 0.08 ** 2, 0.0],
-                             [0.0, 0.0, 0.01 ** 2]]}
+    nonnegative = ("b_m_per_hz",)  # walking steps do not shorten as the cadence rises (Grieve & Gear 1966)
+    preset = height_cadence_params(POPULATION_HEIGHT_M)
+
+    @classmethod
+    def for_height(cls, height_m: float, **overrides: Any) -> "RegressionStepLength":
+        """The height-and-cadence model of a person ``height_m`` tall (see Notes)."""
+        return cls.from_config({**height_cadence_params(height_m), **overrides})
 
     def __init__(self, *, a_m: float, b_m_per_hz: float, c_m_per_m2ps4: float, residual_std_m: float,
                  covariance: list | np.ndarray | None = None):
