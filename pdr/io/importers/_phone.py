@@ -11,6 +11,8 @@ import pandas as pd
 
 from pdr.errors import InputError
 from pdr.io.importers._common import imu_frame, increasing_mask, interp_columns, require_finite, steady_clock
+from pdr.io.recording import ACC_G_MEDIAN_RANGE, ACC_MPS2_MEDIAN_RANGE
+from pdr.constants import GRAVITY_MPS2
 
 Series = tuple[np.ndarray, np.ndarray]  # (t_s increasing, values (N, k))
 MIN_OVERLAP_S = 0.5
@@ -23,6 +25,18 @@ def clean_series(t: np.ndarray, values: np.ndarray, what: str) -> Series:
     require_finite(np.column_stack([t, values]), what, "time and values")
     keep = increasing_mask(t, what)
     return t[keep], values[keep]
+
+
+def require_gravity(acc_mps2: np.ndarray, what: str, hint: str = "") -> None:
+    """Refuse, naming the user's file, acceleration without gravity (median |a| near 2 m/s² instead of 9.8: the
+    phone's "linear acceleration") and acceleration in g labelled m/s²."""
+    med = float(np.median(np.linalg.norm(acc_mps2, axis=1))) if len(acc_mps2) else float("nan")
+    if ACC_G_MEDIAN_RANGE[0] <= med <= ACC_G_MEDIAN_RANGE[1]:
+        raise InputError(f"{what}: expected acceleration in m/s² (median |a| near {GRAVITY_MPS2}), found median |a| = "
+                         f"{med:.3f}: the data look like g")
+    if med < ACC_MPS2_MEDIAN_RANGE[0]:
+        raise InputError(f"{what}: expected acceleration including gravity (median |a| near {GRAVITY_MPS2} m/s²), found "
+                         f"median |a| = {med:.2f} m/s²: linear acceleration (gravity removed){hint}")
 
 
 def combine_imu(acc: Series, gyr: Series | None, mag: Series | None, baro: Series | None, what: str) -> pd.DataFrame:
