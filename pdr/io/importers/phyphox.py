@@ -38,7 +38,7 @@ import pandas as pd
 
 from pdr.errors import InputError
 from pdr.io.importers._common import numeric_array, read_table, safe_id, source_folder, write_recordings
-from pdr.io.importers._phone import Series, clean_series, combine_imu, gnss_table, require_gravity
+from pdr.io.importers._phone import Series, clean_series, combine_imu, gnss_table, require_gravity, require_overlap
 from pdr.io.recording import Recording
 
 _COLUMN = re.compile(r"^(?P<label>.*?)\s*\((?P<unit>[^()]*)\)\s*$")
@@ -177,7 +177,7 @@ def import_source(src: Path, dest: Path, *, rate_hz: float | None = None, force:
                     raise InputError(f"{name}: expected {kind} columns for {', '.join(axes)}, found only {', '.join(sorted(cols))}")
                 a = numeric_array(df.iloc[:, [time_col] + [cols[x] for x in axes]], name)
                 raw[kind] = (a[:, 0], a[:, 1:], name)
-        require_gravity(raw["acc"][1], raw["acc"][2], " (record 'Acceleration with g' in phyphox)")
+        require_gravity(raw["acc"][0], raw["acc"][1], raw["acc"][2], " (record 'Acceleration with g' in phyphox)")
         location = _location(found)
         runs = _runs(folder)
         base = safe_id(src.stem if src.is_file() else src.name)
@@ -208,6 +208,7 @@ def import_source(src: Path, dest: Path, *, rate_hz: float | None = None, force:
                 gnss, geo = gnss_table(t_loc[rows] - (t_start if len(runs) > 1 else 0.0), cols["latitude"][rows],
                                        cols["longitude"][rows], cols["alt"][rows] if cols["alt"] is not None else None,
                                        cols["h_acc"][rows] if cols["h_acc"] is not None else None, name)
+                require_overlap(gnss["t_s"].to_numpy(), imu["t_s"].to_numpy(), name)
                 if geo is None:
                     warnings.warn(f"{name}: no valid fix; gnss.csv not written", stacklevel=2)
                     gnss = None

@@ -41,7 +41,7 @@ from pdr.io.importers._common import (
     find_export_root, interp_columns, numeric_array, read_table, safe_id, source_folder, write_recordings,
 )
 from pdr.constants import GRAVITY_MPS2
-from pdr.io.importers._phone import Series, clean_series, combine_imu, gnss_table, require_gravity
+from pdr.io.importers._phone import Series, clean_series, combine_imu, gnss_table, require_gravity, require_overlap
 from pdr.io.recording import Recording
 
 NS_PER_S = 1e9
@@ -161,7 +161,7 @@ def import_source(src: Path, dest: Path, *, rate_hz: float | None = None, force:
         t0 = acc_raw[0][0]
         ios = meta_csv["platform"] == "ios" and not meta_csv["standardised"]
         sign = -1.0 if ios else 1.0
-        require_gravity(f, acc_name, " (the app's Gravity sensor is needed beside it)")
+        require_gravity(_seconds(acc_raw[0], t0), f, acc_name, " (the app's Gravity sensor is needed beside it)")
         if ios:
             warnings.warn(f"{what}: iOS export without standardised frames; acceleration negated to Android's "
                           "convention (+z up when the phone lies flat)", stacklevel=2)
@@ -188,6 +188,7 @@ def import_source(src: Path, dest: Path, *, rate_hz: float | None = None, force:
             t_ns, ll, extra = loc
             gnss, geo = gnss_table(_seconds(_aligned_ns(loc, "Location.csv", ref_epoch), t0), ll[:, 0], ll[:, 1],
                                    extra["altitude"], extra["horizontalAccuracy"], "Location.csv")
+            require_overlap(gnss["t_s"].to_numpy(), imu["t_s"].to_numpy(), "Location.csv")
             if geo is None:
                 warnings.warn("Location.csv: no valid fix; gnss.csv not written", stacklevel=2)
                 gnss = None
