@@ -13,6 +13,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from pdr.cli.main import main
 from pdr.io.recording import load_recording, save_recording
 from pdr.pipelines.run import run_recording
 from pdr.sim.simulator import simulate
@@ -100,3 +101,5 @@ def test_five_hz_recording_follows_the_gnss_and_says_why(tmp_path):
     traj = pd.read_csv(tmp_path / "out" / "trajectory.csv")
     assert len(traj) == summary["gnss"]["used"]
     assert load_recording(path).sample_rate_hz == pytest.approx(5.0)
+    with pytest.warns(UserWarning, match=r"5.0 Hz is below twice the highest cadence \(7 Hz\)"):
+        assert main(["validate", str(path)]) == 0
