@@ -645,3 +645,17 @@ def test_oxford_optimisation_position_from_folder_name(tmp_path):
     shutil.copytree(OXFORD / "optimisation" / "data" / "Samsung_Carmelo_Hard_Purse_1", src)
     rec = load_recording(_import("oxford", src, tmp_path / "out")[0][0])
     assert rec.id == "Pixel_Ann_Carpet_InHand_2" and rec.placement == "hand"
+
+
+@pytest.mark.parametrize("fmt, name", [("sensorlogger", "sensorlogger_android"), ("sensorlogger", "sensorlogger_ios"),
+                                       ("sensorlogger", "sensorlogger_ios_uncalibrated"),
+                                       ("sensorlogger", "sensorlogger_ios_clocks"), ("phyphox", "phyphox_multi"),
+                                       ("phyphox", "phyphox_rawdata_semicolon"), ("phyphox", "phyphox_custom")])
+def test_every_phone_fixture_imports_validates_and_runs(tmp_path, capsys, fmt, name):
+    rc, out, err = _cli(["import", fmt, HAND / name, tmp_path / "recs"], capsys)
+    assert rc == 0, err
+    for rec in out.split():
+        rc, out_v, err = _cli(["validate", rec], capsys)
+        assert rc == 0 and out_v.startswith("ok:"), err
+        rc, out_r, err = _cli(["run", rec, "-o", tmp_path / "runs" / Path(rec).name], capsys)
+        assert rc == 0 and "steps" in out_r, err
