@@ -323,8 +323,8 @@ def _default_workers() -> int:
         return os.cpu_count() or 1
 
 
-def output_folders(recs: list[Path]) -> dict[str, Path]:
-    """``{output folder name: recording}``: the recording id, or for recordings that share an id (seeds of one
+def output_folders(recs: list[Path]) -> dict[str, tuple[str, Path]]:
+    """``{output folder name: (recording id, recording)}``: the recording id, or for recordings that share an id (seeds of one
     scenario, two phones exporting the same name) the recording's folder name, then ``_2``, ``_3``... until unique.
     The same recording given twice is an error."""
     seen: dict[Path, Path] = {}
@@ -336,13 +336,13 @@ def output_folders(recs: list[Path]) -> dict[str, Path]:
     ids = [_recording_id(rec) for rec in recs]
     shared = {rid for rid in ids if ids.count(rid) > 1}
     unique = {rid for rid in ids if rid not in shared}
-    out: dict[str, Path] = {}
+    out: dict[str, tuple[str, Path]] = {}
     for rec, rid in zip(recs, ids):
         name = rid if rid in unique else safe_id(rec.name)
         base, k = name, 2
         while name in out or (rid in shared and name in unique):
             name, k = f"{base}_{k}", k + 1
-        out[name] = rec
+        out[name] = (rid, rec)
     return out
 
 
@@ -378,11 +378,11 @@ def run_batch(recs: list[Path], out: Path, *, engine: str = "local", workers: in
 
     rows: dict[str, dict] = {}
     jobs: list[Job] = []
-    for rid, rec in ids.items():
-        if is_complete(out / rid) and _options_match(out / rid, run_kwargs):
-            rows[str(rec)] = _completed_row(str(rec), out / rid)
+    for folder, (_, rec) in ids.items():
+        if is_complete(out / folder) and _options_match(out / folder, run_kwargs):
+            rows[str(rec)] = _completed_row(str(rec), out / folder)
         else:  # absolute paths: a Dask worker may run in another folder
-            jobs.append((rec.resolve(), (out / rid).resolve(), str(rec)))
+            jobs.append((rec.resolve(), (out / folder).resolve(), str(rec)))
     progress = _Progress(len(jobs), progress_stream)
     results: Iterable[dict]
     if engine == "local":
@@ -393,8 +393,8 @@ def run_batch(recs: list[Path], out: Path, *, engine: str = "local", workers: in
         rows[row["recording_path"]] = row
 
     table = pd.DataFrame(
-        [{"recording_id": _recording_id(rec), **rows[str(rec)], "output_folder": folder}
-         for folder, rec in sorted(ids.items())], columns=SUMMARY_COLUMNS
+        [{"recording_id": rid, **rows[str(rec)], "output_folder": folder}
+         for folder, (rid, rec) in sorted(ids.items())], columns=SUMMARY_COLUMNS
     )
     write_csv(out / "summary.csv", table)
     counts = table["status"].value_counts()
