@@ -23,7 +23,8 @@ MAX_GNSS_OUTSIDE_S = 60.0  # a first fix may come a while after the start tap; h
 def clean_series(t: np.ndarray, values: np.ndarray, what: str) -> Series:
     """Finite values required (an empty cell means a damaged or truncated file), then strictly increasing time:
     repeated or back-stepping samples are dropped with a warning."""
-    values = np.asarray(values, float).reshape(len(t), -1)
+    values = np.asarray(values, float)
+    values = values.reshape(len(t), values.shape[1] if values.ndim == 2 else -1)
     require_finite(np.column_stack([t, values]), what, "time and values")
     keep = increasing_mask(t, what)
     return t[keep], values[keep]

@@ -135,10 +135,12 @@ def _runs(folder: Path) -> list[tuple[float, float, float | None]]:
 
 
 def _run_rows(t: np.ndarray, runs: list[tuple[float, float, float | None]], k: int) -> np.ndarray:
-    """The rows of run ``k``: where the time restarts (steps back at a resume) the ``k``-th stretch between
-    restarts, otherwise the samples inside the run's experiment-time window."""
+    """The rows of run ``k`` (all rows when there is one run): where the time restarts (steps back at a resume) the
+    ``k``-th stretch between restarts, otherwise the samples inside the run's experiment-time window."""
+    if len(runs) == 1:
+        return np.ones(len(t), bool)
     restarts = np.flatnonzero(np.diff(t) < -0.5) + 1  # a resume that restarts the clock (small stutters are repaired)
-    if len(runs) > 1 and len(restarts) == len(runs) - 1:
+    if len(restarts) == len(runs) - 1:
         bounds = np.concatenate([[0], restarts, [len(t)]])
         rows = np.zeros(len(t), bool)
         rows[bounds[k]:bounds[k + 1]] = True
@@ -215,6 +217,8 @@ def import_source(src: Path, dest: Path, *, rate_hz: float | None = None, force:
                 else:
                     meta["geo"] = geo
             recordings.append(Recording(meta=meta, imu=imu, gnss=gnss))
+        if not recordings:
+            raise InputError(f"{what}: expected acceleration samples in at least one run of meta/time.csv, found none")
         return write_recordings(recordings, dest, force=force)
 
 
