@@ -1,16 +1,17 @@
 """What is not walking: a vehicle, a bicycle, or a recording too slow for steps, found with the GNSS.
 
 A person on foot covers at most one step length per step: over a window of ``WINDOW_S``, the distance the GNSS
-surely covered (the displacement less ``SPEED_SIGMAS`` times the two fixes' accuracies) can not exceed
-``MAX_STEP_M`` (the longest step any step model yields; a sprint step is ~1.5 m) times the steps found in it, nor
-the fastest speed of a person on foot for the body. The running limit is a Froude number
-``v^2 / (g L) = MAX_FROUDE`` with leg length ``L = 0.53 * height`` (Winter, *Biomechanics and Motor Control of Human
-Movement*, segment proportions): Froude 4 is 6.1 m/s for a 1.75 m person, a fast amateur run (the walk-run transition
-is Froude 0.5, Alexander 1989). Above Froude 1 (3 m/s) no one walks (the inverted pendulum would leave the ground):
+surely covered (the displacement between the medians of the first and last ``MEDIAN_FIXES`` fixes, less
+``SPEED_SIGMAS`` times their accuracies) can not exceed ``MAX_STEP_M`` (the longest step any step model yields; a
+sprint step is ~1.5 m) times the steps found in it, nor the fastest speed of a person on foot for the body. The
+running limit is a Froude number ``v^2 / (g L) = MAX_FROUDE`` with leg length ``L = 0.53 * height`` (Winter,
+*Biomechanics and Motor Control of Human Movement*, segment proportions): Froude 4 is 6.1 m/s for a 1.75 m person,
+a fast amateur run (the walk-run transition is Froude 0.5, Alexander 1989). Above Froude 1 (3 m/s) no one walks (the inverted pendulum would leave the ground):
 a person on foot runs, and running has flight phases (specific force under 0.25 g) and impacts over 1 g at every
 step, a step-window variance of |a| of at least ``(MIN_RUN_ACC_STD_G g)^2``; "steps" found without it are the
 pedalling or the bounce of a bicycle or a car (no gait periodicity). Windows that break any bound are not walking;
-overlapping ones merge into one interval, whose steps are dropped with a warning.
+runs of ``MIN_FLAGGED_WINDOWS`` of them (starting at consecutive fixes) merge into intervals where less than a window apart;
+those lasting ``MIN_INTERVAL_S`` lose their steps, with a warning.
 
 Below ``2 * MAX_CADENCE_HZ`` samples per second a step's impact can not be told from the next one (Nyquist): no step
 is looked for, and the run follows the GNSS alone.
@@ -31,7 +32,10 @@ SPEED_SIGMAS = 2.0
 DEFAULT_H_ACC_M = 5.0  # a phone fix without an accuracy
 MIN_MOVING_MPS = 0.5  # a window without steps that moves slower than this is GNSS noise about a standing person
 MAX_FROUDE = 4.0
+MEDIAN_FIXES = 3  # each window's ends: the median of 3 fixes (an outlying fix moves no median)
 MIN_FLAGGED_WINDOWS = 3  # consecutive windows: a single outlying fix flags only windows that do not follow each other
+MIN_INTERVAL_S = 3 * WINDOW_S  # a merged interval at least this long: outlying fixes flag short ones (10% of fixes
+# 50 m off: one of 16 s in 2 x 30 min), a ride lasts minutes
 RUN_ONLY_FROUDE = 1.0
 MIN_RUN_ACC_STD_G = 0.25
 LEG_PER_HEIGHT = 0.53
@@ -80,8 +84,10 @@ def not_walking_intervals(steps: pd.DataFrame, gnss: pd.DataFrame | None, height
         dt = t[j] - t[i]
         if dt > 2 * WINDOW_S:  # a GNSS outage: the window says nothing about speed
             continue
-        sure = max(0.0, float(np.hypot(e[j] - e[i], n[j] - n[i])) - SPEED_SIGMAS * float(np.hypot(h[i], h[j])))
-        v = sure / dt
+        a, b = slice(i, min(i + MEDIAN_FIXES, j)), slice(max(j - MEDIAN_FIXES + 1, i + 1), j + 1)
+        d = float(np.hypot(np.median(e[b]) - np.median(e[a]), np.median(n[b]) - np.median(n[a])))
+        sure = max(0.0, d - SPEED_SIGMAS * float(np.hypot(np.median(h[a]), np.median(h[b]))))
+        v = sure / max(float(np.median(t[b]) - np.median(t[a])), 1e-9)  # the time between the medians
         lo, hi = int(np.searchsorted(step_t_s, t[i], side="left")), int(np.searchsorted(step_t_s, t[j], side="right"))
         k = hi - lo
         if v > v_foot:
@@ -101,11 +107,12 @@ def not_walking_intervals(steps: pd.DataFrame, gnss: pd.DataFrame | None, height
     intervals: list[dict[str, Any]] = []
     for run in (r for r in runs if len(r) >= MIN_FLAGGED_WINDOWS):
         a, b, v = run[0][1], max(f[2] for f in run), max(f[3] for f in run)
-        if intervals and a <= intervals[-1]["t_end_s"]:
+        if intervals and a <= intervals[-1]["t_end_s"] + WINDOW_S:  # one window short of flagged is still the ride
             intervals[-1]["t_end_s"] = max(intervals[-1]["t_end_s"], b)
             intervals[-1]["speed_mps"] = max(intervals[-1]["speed_mps"], v)
             continue
         intervals.append({"t_start_s": float(a), "t_end_s": float(b), "speed_mps": float(v), "reason": run[0][4]})
+    intervals = [iv for iv in intervals if iv["t_end_s"] - iv["t_start_s"] >= MIN_INTERVAL_S]
     for iv in intervals:
         inside = (step_t_s >= iv["t_start_s"]) & (step_t_s <= iv["t_end_s"])
         iv["n_steps"] = int(inside.sum())
