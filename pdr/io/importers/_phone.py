@@ -1,5 +1,6 @@
 """Shared by the smartphone-app importers (Sensor Logger, phyphox): one IMU table from sensors on separate clocks,
-and the GNSS table with its geo origin."""
+the GNSS table with its geo origin, and the checks that name the user's file (gravity present, GNSS on the same
+clock)."""
 
 from __future__ import annotations
 
@@ -9,10 +10,10 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from pdr.constants import GRAVITY_MPS2
 from pdr.errors import InputError
 from pdr.io.importers._common import imu_frame, increasing_mask, interp_columns, require_finite, steady_clock
 from pdr.io.recording import ACC_G_MEDIAN_RANGE, ACC_MPS2_MEDIAN_RANGE
-from pdr.constants import GRAVITY_MPS2
 
 Series = tuple[np.ndarray, np.ndarray]  # (t_s increasing, values (N, k))
 MIN_OVERLAP_S = 0.5

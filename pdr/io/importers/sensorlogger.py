@@ -36,11 +36,11 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from pdr.constants import GRAVITY_MPS2
 from pdr.errors import InputError
 from pdr.io.importers._common import (
     find_export_root, interp_columns, numeric_array, read_table, safe_id, source_folder, write_recordings,
 )
-from pdr.constants import GRAVITY_MPS2
 from pdr.io.importers._phone import Series, clean_series, combine_imu, gnss_table, require_gravity, require_overlap
 from pdr.io.recording import Recording
 
@@ -185,7 +185,7 @@ def import_source(src: Path, dest: Path, *, rate_hz: float | None = None, force:
                                               "source": "sensorlogger", "start_unix_s": start_ns / NS_PER_S}}
         gnss = None
         if loc is not None:
-            t_ns, ll, extra = loc
+            _, ll, extra = loc
             gnss, geo = gnss_table(_seconds(_aligned_ns(loc, "Location.csv", ref_epoch), t0), ll[:, 0], ll[:, 1],
                                    extra["altitude"], extra["horizontalAccuracy"], "Location.csv")
             require_overlap(gnss["t_s"].to_numpy(), imu["t_s"].to_numpy(), "Location.csv")
