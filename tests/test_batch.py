@@ -252,10 +252,24 @@ def test_progress_bar_on_a_terminal_only():
 def test_bad_arguments(recordings, tmp_path, capsys):
     walk = str(recordings[0])
     assert main(["batch", walk, walk, "-o", str(tmp_path / "o")]) == 1
-    assert "expected unique ids" in capsys.readouterr().err
+    assert "expected each recording once" in capsys.readouterr().err
     assert main(["batch", walk, "-o", str(tmp_path / "o"), "--workers", "0"]) == 1
     assert "--workers: expected at least 1, found 0" in capsys.readouterr().err
     assert main(["batch", walk, "-o", str(tmp_path / "o"), "--scheduler", "tcp://127.0.0.1:1"]) == 1
     assert "--scheduler: expected it with --engine dask only" in capsys.readouterr().err
     assert main(["batch", walk, "-o", str(tmp_path / "o"), "--config", str(tmp_path / "missing.toml")]) == 1
     assert "expected a file" in capsys.readouterr().err
+
+
+def test_recordings_sharing_an_id_get_unique_folders(tmp_path):
+    """Eight seeds of one scenario keep the scenario's id; two phones export the same name: each its own folder."""
+    raw = _short_walk(0)
+    recs = [save_recording(simulate(raw, seed), tmp_path / "recs" / f"seed{seed}") for seed in range(2)]
+    recs.append(save_recording(simulate(raw, 2), tmp_path / "other" / "seed0"))  # same id and same folder name
+    line = batch.run_batch(recs, tmp_path / "out", workers=1)
+    assert "3 ok" in line
+    table = pd.read_csv(tmp_path / "out" / "summary.csv")
+    assert sorted(table["output_folder"]) == ["seed0", "seed0_2", "seed1"]
+    assert set(table["recording_id"]) == {"walk_0"}
+    for folder in table["output_folder"]:
+        assert (tmp_path / "out" / folder / "summary.json").is_file()

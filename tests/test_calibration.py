@@ -222,3 +222,14 @@ def test_unreported_gnss_jumps_are_dropped():
     akf = AdaptiveKalmanCalibration().fit(steps, gnss, RegressionStepLength.population())
     est = akf.model_.estimate(steps).step_length_m_
     assert abs(est.sum() / length.sum() - 1) < 0.02
+
+
+def test_cli_calibrate_says_which_gate_failed(tmp_path, capsys):
+    rec = walking_recording(tmp_path / "poor", duration_s=30.0, speed_mps=1.4, with_gnss=True)
+    gnss = pd.read_csv(rec / "gnss.csv")
+    gnss["h_acc_m"] = 25.0  # fixes exist, inside the walk, but none passes the accuracy gate
+    gnss.to_csv(rec / "gnss.csv", index=False)
+    assert main(["calibrate", str(rec), "-o", str(tmp_path / "m.json")]) == 1
+    errors = [line for line in capsys.readouterr().err.splitlines() if line.startswith("error:")]
+    assert len(errors) == 1 and "fail the accuracy gate h_acc_m <= 10 m" in errors[0], errors
+    assert not (tmp_path / "m.json").exists()

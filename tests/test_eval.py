@@ -102,6 +102,18 @@ def test_reference_step_count_prefers_summary(tmp_path):
     assert m["n_steps_ref"] == 62 and m["step_count_error"] == -9 and m["step_recall"] == pytest.approx(50 / 60)
 
 
+def test_summary_toml_without_a_summary_table(tmp_path, capsys):
+    """``reference/summary.toml`` with its keys at the top level is read the same; other tables are refused."""
+    t, _ = _ref_path()
+    out, rec = _make_case(tmp_path, reference={"steps": pd.DataFrame({"t_s": t[1:]}), "summary": {"n_steps": 62}})
+    (rec / "reference" / "summary.toml").write_text("n_steps = 62\n")
+    assert evaluate_run(out, rec)["n_steps_ref"] == 62
+    (rec / "reference" / "summary.toml").write_text("[truth]\nn_steps = 62\n")
+    assert main(["evaluate", str(out), str(rec)]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("error:") and "[summary] table" in err and len(err.splitlines()) == 1
+
+
 def test_landmarks_only_reference_leaves_the_anchor_out(tmp_path):
     t, xy = _ref_path()
     lms = pd.DataFrame({"t_s": [0.0, 10.0, 20.0, 30.0], "e_m": [0.0, 10.0, 10.0, 0.0], "n_m": [0.0, 0.0, 10.0, 10.0]})

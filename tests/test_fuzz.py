@@ -228,6 +228,9 @@ def seeds(tmp_path_factory) -> dict[str, Path]:
     out["sensorlogger_ios"] = HAND / "sensorlogger_ios"
     out["phyphox"] = HAND / "phyphox_multi"
     out["phyphox_semicolon"] = HAND / "phyphox_rawdata_semicolon"
+    out["sensorlogger_ios_clocks"] = HAND / "sensorlogger_ios_clocks"
+    out["sensorlogger_ios_uncalibrated"] = HAND / "sensorlogger_ios_uncalibrated"
+    out["phyphox_custom"] = HAND / "phyphox_custom"
     out["gpx"] = HAND / "track.gpx"
     # a recording for `pdr import gpx` (it adds gnss.csv to it) and one for `pdr validate`
     t = np.arange(0.0, 12.0, 0.01)
@@ -450,7 +453,21 @@ def test_fuzz_phyphox(seeds, ops, pick, zip_it, zip_ops):
 
 
 @FUZZ
+@given(ops=MUTATIONS, pick=st.integers(0, 4), zip_it=st.booleans(), which=st.sampled_from(["clocks", "uncalibrated"]))
+def test_fuzz_sensorlogger_ios_quirks(seeds, ops, pick, zip_it, which):
+    fuzz_import("sensorlogger", seeds[f"sensorlogger_ios_{which}"], ops, pick, zip_it=zip_it,
+                target=f"sensorlogger_ios_{which}")
+
+
+@FUZZ
+@given(ops=MUTATIONS, pick=st.integers(0, 4), zip_it=st.booleans())
+def test_fuzz_phyphox_custom(seeds, ops, pick, zip_it):
+    fuzz_import("phyphox", seeds["phyphox_custom"], ops, pick, zip_it=zip_it, target="phyphox_custom")
+
+
+@FUZZ
 @given(ops=MUTATIONS, zip_it=st.booleans())
+@example(ops=[("units", 0, 0.0, 150, -1.0)], zip_it=False)  # every time negated: an empty series escaped
 def test_fuzz_phyphox_semicolon(seeds, ops, zip_it):
     fuzz_import("phyphox", seeds["phyphox_semicolon"], ops, 0, zip_it=zip_it, target="phyphox_semicolon")
 

@@ -338,6 +338,91 @@ def test_sensorlogger_ios_gravity_added_and_sign_flipped(tmp_path):
     np.testing.assert_allclose(rec.imu["acc_z_mps2"].to_numpy(), android.imu["acc_z_mps2"].to_numpy(), atol=1e-5)
 
 
+def test_fixtures_are_byte_faithful():
+    """What the apps write: Sensor Logger's Metadata.csv without a final line break, an empty Location.csv when no
+    fix came; phyphox data files ending without a line break, often with an empty row ``""``."""
+    for name in ("sensorlogger_android", "sensorlogger_ios", "sensorlogger_ios_uncalibrated", "sensorlogger_ios_clocks"):
+        assert not (HAND / name / "Metadata.csv").read_bytes().endswith(b"\n")
+    assert (HAND / "sensorlogger_ios_uncalibrated" / "Location.csv").stat().st_size == 0
+    assert (HAND / "phyphox_multi" / "Accelerometer.csv").read_bytes().endswith(b'\n""')
+    assert not (HAND / "phyphox_multi" / "Gyroscope.csv").read_bytes().endswith(b"\n")
+    assert (HAND / "phyphox_custom" / "Acceleration.csv").read_bytes().startswith(b'"time","Acceleration x"')
+
+
+def test_sensorlogger_ios_uncalibrated_in_g_and_empty_location(tmp_path):
+    paths, messages = _import("sensorlogger", HAND / "sensorlogger_ios_uncalibrated", tmp_path / "u")
+    rec = load_recording(paths[0])
+    android = load_recording(_import("sensorlogger", HAND / "sensorlogger_android", tmp_path / "a")[0][0])
+    np.testing.assert_allclose(rec.imu["acc_z_mps2"].to_numpy(), android.imu["acc_z_mps2"].to_numpy(), atol=1e-5)
+    assert rec.gnss is None and any("Location.csv: empty file" in m for m in messages)
+
+
+def test_sensorlogger_ios_clock_origins_aligned(tmp_path):
+    paths, messages = _import("sensorlogger", HAND / "sensorlogger_ios_clocks", tmp_path)
+    rec = load_recording(paths[0])
+    np.testing.assert_allclose(rec.gnss["t_s"], [0.3, 1.3, 1.9], atol=1e-6)
+    assert any("-20562.0 s from the accelerometer" in m or "+20562.0 s" in m for m in messages), messages
+    # the absolute time kept is the one Metadata.csv's recording epoch time agrees with (the location's)
+    assert abs(rec.meta["recording"]["start_unix_s"] - 1717236000.2) < 1e-3
+
+
+def test_sensorlogger_clock_apart_without_seconds_elapsed_refused(tmp_path, capsys):
+    src = tmp_path / "export"
+    shutil.copytree(HAND / "sensorlogger_ios_clocks", src)
+    loc = pd.read_csv(src / "Location.csv").drop(columns="seconds_elapsed")
+    loc.to_csv(src / "Location.csv", index=False)
+    rc, _, err = _cli(["import", "sensorlogger", src, tmp_path / "out"], capsys)
+    _assert_one_error(rc, err)
+    assert "Location.csv" in err and "another origin" in err and not (tmp_path / "out").exists()
+
+
+def test_phyphox_custom_experiment_paused_gives_one_recording_per_run(tmp_path):
+    paths, messages = _import("phyphox", HAND / "phyphox_custom", tmp_path)
+    assert [p.name for p in paths] == ["phyphox_custom_run1", "phyphox_custom_run2"]
+    runs = [load_recording(p) for p in paths]
+    assert [r.meta["recording"]["start_unix_s"] for r in runs] == [1717236000.0, 1717236030.75]
+    for r in runs:
+        assert r.imu["t_s"].iloc[0] < 0.02 and r.imu["t_s"].iloc[-1] < 0.76 and "baro_hpa" in r.imu
+        assert len(r.gnss) == 2 and np.all(np.diff(r.gnss["t_s"]) > 0)
+    assert any("paused 1 time" in m for m in messages)
+
+
+@pytest.mark.parametrize("fmt, folder, name", [("phyphox", "phyphox_multi", "Linear Accelerometer.csv"),
+                                               ("sensorlogger", "sensorlogger_android", "Accelerometer.csv")])
+def test_linear_acceleration_named_accelerometer_refused_naming_the_file(tmp_path, capsys, fmt, folder, name):
+    src = tmp_path / "export"
+    src.mkdir()
+    if fmt == "phyphox":
+        shutil.copy(HAND / folder / name, src / "Accelerometer.csv")  # gravity removed, in a file named Accelerometer.csv
+    else:
+        shutil.copy(HAND / folder / name, src / "TotalAcceleration.csv")
+    rc, _, err = _cli(["import", fmt, src, tmp_path / "out"], capsys)
+    _assert_one_error(rc, err)
+    expected = "Accelerometer.csv" if fmt == "phyphox" else "TotalAcceleration.csv"
+    assert "linear acceleration (gravity removed)" in err and expected in err and "imu.csv" not in err
+    assert not (tmp_path / "out").exists()
+
+
+def test_other_apps_zip_mixed_exports_and_unknown_columns_refused(tmp_path, capsys):
+    other = _zip_folder(HAND / "phyphox_multi", tmp_path / "phyphox.zip")
+    rc, _, err = _cli(["import", "sensorlogger", other, tmp_path / "out"], capsys)
+    _assert_one_error(rc, err)
+    assert "Sensor Logger" in err
+    mixed = tmp_path / "mixed"
+    shutil.copytree(HAND / "sensorlogger_android", mixed / "a")
+    shutil.copytree(HAND / "sensorlogger_ios", mixed / "b")
+    rc, _, err = _cli(["import", "sensorlogger", mixed, tmp_path / "out"], capsys)
+    _assert_one_error(rc, err)
+    assert "found 2" in err
+    odd = tmp_path / "odd"
+    shutil.copytree(HAND / "sensorlogger_android", odd)
+    (odd / "TotalAcceleration.csv").write_text("when,a,b,c\n1,2,3,4\n")
+    rc, _, err = _cli(["import", "sensorlogger", odd, tmp_path / "out"], capsys)
+    _assert_one_error(rc, err)
+    assert "TotalAcceleration.csv" in err and "time, x, y, z" in err
+    assert not (tmp_path / "out").exists()
+
+
 def test_sensorlogger_without_gravity_is_refused(tmp_path):
     src = tmp_path / "export"
     shutil.copytree(HAND / "sensorlogger_ios", src)
@@ -358,7 +443,7 @@ def test_phyphox_folder_zip_and_decimal_comma(tmp_path):
     zipped = load_recording(_import("phyphox", _zip_folder(src, tmp_path / "walk.zip"), tmp_path / "b")[0][0])
     pd.testing.assert_frame_equal(zipped.imu, rec.imu)
     semi = load_recording(_import("phyphox", HAND / "phyphox_rawdata_semicolon", tmp_path / "c")[0][0])
-    np.testing.assert_allclose(semi.imu["acc_y_mps2"], acc["Y (m/s^2)"], rtol=1e-8)
+    np.testing.assert_allclose(semi.imu["acc_y_mps2"], acc["Y (m/s^2)"].dropna(), rtol=1e-8)
 
 
 def test_phyphox_linear_only_and_g_units_are_refused(tmp_path, capsys):
@@ -598,3 +683,17 @@ def test_oxford_optimisation_position_from_folder_name(tmp_path):
     shutil.copytree(OXFORD / "optimisation" / "data" / "Samsung_Carmelo_Hard_Purse_1", src)
     rec = load_recording(_import("oxford", src, tmp_path / "out")[0][0])
     assert rec.id == "Pixel_Ann_Carpet_InHand_2" and rec.placement == "hand"
+
+
+@pytest.mark.parametrize("fmt, name", [("sensorlogger", "sensorlogger_android"), ("sensorlogger", "sensorlogger_ios"),
+                                       ("sensorlogger", "sensorlogger_ios_uncalibrated"),
+                                       ("sensorlogger", "sensorlogger_ios_clocks"), ("phyphox", "phyphox_multi"),
+                                       ("phyphox", "phyphox_rawdata_semicolon"), ("phyphox", "phyphox_custom")])
+def test_every_phone_fixture_imports_validates_and_runs(tmp_path, capsys, fmt, name):
+    rc, out, err = _cli(["import", fmt, HAND / name, tmp_path / "recs"], capsys)
+    assert rc == 0, err
+    for rec in out.split():
+        rc, out_v, err = _cli(["validate", rec], capsys)
+        assert rc == 0 and out_v.startswith("ok:"), err
+        rc, out_r, err = _cli(["run", rec, "-o", tmp_path / "runs" / Path(rec).name], capsys)
+        assert rc == 0 and "steps" in out_r, err

@@ -29,7 +29,12 @@ def _cmd_import(args: argparse.Namespace) -> int:
 def _cmd_validate(args: argparse.Namespace) -> int:
     from pdr.io.recording import load_recording
 
+    from pdr.pipelines.not_walking import min_step_rate_hz
+
     rec = load_recording(args.rec)
+    if rec.sample_rate_hz < min_step_rate_hz():
+        warnings.warn(f"{rec.id}: sampling rate {rec.sample_rate_hz:.1f} Hz is below twice the highest cadence "
+                      f"({min_step_rate_hz():g} Hz): no step can be found; pdr run follows the GNSS alone", stacklevel=2)
     parts = [f"{len(rec.imu)} IMU samples at {rec.sample_rate_hz:.1f} Hz", f"placement {rec.placement}"]
     parts += [f"imu_{k}" for k in rec.extra_imus]
     if rec.gnss is not None:

@@ -320,6 +320,20 @@ def read_csv(path: Path, what: str | None = None) -> pd.DataFrame:
     return df
 
 
+def _reference_summary(raw: dict[str, Any]) -> dict[str, Any]:
+    """``reference/summary.toml``: its ``[summary]`` table, or the same keys written at the top level without one."""
+    if "summary" in raw:
+        if not isinstance(raw["summary"], dict) or len(raw) > 1:
+            raise InputError("reference/summary.toml: expected one [summary] table (or its keys at the top level), found "
+                             f"{', '.join(sorted(raw))}")
+        return raw["summary"]
+    tables = sorted(k for k, v in raw.items() if isinstance(v, dict))
+    if tables:
+        raise InputError(f"reference/summary.toml: expected a [summary] table (or its keys at the top level), found the "
+                         f"table(s) {', '.join(tables)}")
+    return raw
+
+
 def _load_reference(ref_dir: Path) -> dict[str, Any]:
     reference: dict[str, Any] = {}
     if not ref_dir.is_dir():
@@ -333,7 +347,7 @@ def _load_reference(ref_dir: Path) -> dict[str, Any]:
                 raise InputError(f"reference/{name}.csv: expected columns {', '.join(required)}, found {', '.join(df.columns)}")
             reference[name] = df
     if (ref_dir / "summary.toml").is_file():
-        reference["summary"] = read_toml(ref_dir / "summary.toml", what="reference/summary.toml").get("summary", {})
+        reference["summary"] = _reference_summary(read_toml(ref_dir / "summary.toml", what="reference/summary.toml"))
     return reference
 
 

@@ -34,10 +34,11 @@ from typing import Any, Iterable, Iterator
 import pandas as pd
 
 from pdr.errors import InputError
+from pdr.io.importers._common import safe_id
 from pdr.io.atomic import write_csv
 from pdr.io.tomlio import read_toml
 
-SUMMARY_COLUMNS = ["recording_id", "recording_path", "status", "distance_m", "n_steps", "duration_s", "error"]
+SUMMARY_COLUMNS = ["recording_id", "recording_path", "status", "distance_m", "n_steps", "duration_s", "error", "output_folder"]
 SCHEDULER_TIMEOUT_S = 4.0  # connect + handshake with --scheduler; with the imports (4-6 s on a loaded 2-core machine)
 # the command fails within 10 s
 COMPLETE_MARKERS = ("run.json", "summary.json", "trajectory.csv")
@@ -322,10 +323,35 @@ def _default_workers() -> int:
         return os.cpu_count() or 1
 
 
+def output_folders(recs: list[Path]) -> dict[str, tuple[str, Path]]:
+    """``{output folder name: (recording id, recording)}``: the recording id, or for recordings that share an id (seeds of one
+    scenario, two phones exporting the same name) the recording's folder name, then ``_2``, ``_3``... until unique.
+    The same recording given twice is an error."""
+    seen: dict[Path, Path] = {}
+    for rec in recs:
+        key = rec.resolve()
+        if key in seen:
+            raise InputError(f"{rec}: expected each recording once, found it twice ({seen[key]} and {rec})")
+        seen[key] = rec
+    ids = [_recording_id(rec) for rec in recs]
+    shared = {rid for rid in ids if ids.count(rid) > 1}
+    unique = {rid for rid in ids if rid not in shared}
+    out: dict[str, tuple[str, Path]] = {}
+    for rec, rid in zip(recs, ids):
+        name = rid if rid in unique else safe_id(rec.name)
+        base, k = name, 2
+        while name in out or (rid in shared and name in unique):
+            name, k = f"{base}_{k}", k + 1
+        out[name] = (rid, rec)
+    return out
+
+
 def run_batch(recs: list[Path], out: Path, *, engine: str = "local", workers: int | None = None, scheduler: str | None = None,
               config_path: str | None = None, model_path: str | None = None, use_gnss: bool = True,
               progress_stream=None) -> str:
     """Run every recording into ``out/<recording id>/`` and write ``out/summary.csv``; return a one-line summary.
+
+    Recordings that share an id get unique folders (``output_folders``); ``summary.csv`` names each one's folder.
 
     Raises InputError (after writing the summary) when any recording failed, so the exit code tells.
     """
@@ -345,24 +371,18 @@ def run_batch(recs: list[Path], out: Path, *, engine: str = "local", workers: in
     if engine == "dask" and scheduler:  # first: its answer bounds the time to an error, whatever the recordings
         _check_dask_installed()
         _check_scheduler(scheduler)
-    ids: dict[str, Path] = {}
-    for rec in recs:
-        rec = Path(rec)
-        rid = _recording_id(rec)
-        if rid in ids:
-            raise InputError(f"recording id {rid!r}: expected unique ids, found it in both {ids[rid]} and {rec}")
-        ids[rid] = rec
+    ids = output_folders([Path(r) for r in recs])
     run_kwargs = {"config_path": str(Path(config_path).resolve()) if config_path is not None else None,
                   "model_path": str(Path(model_path).resolve()) if model_path is not None else None,
                   "use_gnss": use_gnss}
 
     rows: dict[str, dict] = {}
     jobs: list[Job] = []
-    for rid, rec in ids.items():
-        if is_complete(out / rid) and _options_match(out / rid, run_kwargs):
-            rows[str(rec)] = _completed_row(str(rec), out / rid)
+    for folder, (_, rec) in ids.items():
+        if is_complete(out / folder) and _options_match(out / folder, run_kwargs):
+            rows[str(rec)] = _completed_row(str(rec), out / folder)
         else:  # absolute paths: a Dask worker may run in another folder
-            jobs.append((rec.resolve(), (out / rid).resolve(), str(rec)))
+            jobs.append((rec.resolve(), (out / folder).resolve(), str(rec)))
     progress = _Progress(len(jobs), progress_stream)
     results: Iterable[dict]
     if engine == "local":
@@ -373,7 +393,8 @@ def run_batch(recs: list[Path], out: Path, *, engine: str = "local", workers: in
         rows[row["recording_path"]] = row
 
     table = pd.DataFrame(
-        [{"recording_id": rid, **rows[str(rec)]} for rid, rec in sorted(ids.items())], columns=SUMMARY_COLUMNS
+        [{"recording_id": rid, **rows[str(rec)], "output_folder": folder}
+         for folder, (rid, rec) in sorted(ids.items())], columns=SUMMARY_COLUMNS
     )
     write_csv(out / "summary.csv", table)
     counts = table["status"].value_counts()

@@ -36,6 +36,32 @@ TRAJECTORY_POSITION_STD_M = 0.05  # a reference system (motion capture, RTK, a s
 TRAJECTORY_SEGMENT_S = 30.0
 
 
+def _why_no_segment(steps_list, gnss_list, akf) -> str:
+    """Which gate left no GNSS segment: no valid fix, the accuracy gate, or no fix inside a walking bout."""
+    n_valid = n_accurate = n_in_bout = 0
+    for steps, gnss in zip(steps_list, gnss_list):
+        if gnss is None:  # a recording calibrated by a known distance
+            continue
+        valid = np.isfinite(gnss["e_m"].to_numpy(float)) & np.isfinite(gnss["n_m"].to_numpy(float))
+        h = gnss["h_acc_m"].to_numpy(float) if "h_acc_m" in gnss else np.full(len(gnss), np.nan)
+        accurate = valid & (np.where(np.isfinite(h), h, akf.assumed_h_acc_m) <= akf.max_h_acc_m)
+        t = gnss["t_s"].to_numpy(float)
+        in_bout = np.zeros(len(t), bool)
+        if len(steps):
+            for _, b in steps.groupby("bout_id")["t_s"]:
+                in_bout |= (t >= b.min()) & (t <= b.max())
+        n_valid, n_accurate, n_in_bout = n_valid + int(valid.sum()), n_accurate + int(accurate.sum()), \
+            n_in_bout + int((accurate & in_bout).sum())
+    if n_valid == 0:
+        return "no valid (unmasked) GNSS fix"
+    if n_accurate == 0:
+        return (f"all {n_valid} valid fixes fail the accuracy gate h_acc_m <= {akf.max_h_acc_m:g} m "
+                "([calibration] max_h_acc_m)")
+    if n_in_bout < 2:
+        return f"{n_accurate} of {n_valid} valid fixes pass the accuracy gate but fewer than 2 lie inside a walking bout"
+    return f"{n_in_bout} accurate fixes inside walking bouts, but no segment of {akf.min_segment_steps:g}+ steps between them"
+
+
 def known_distances(n_recs: int, distance_m: list[float] | None = None, landmarks: list[Path] | None = None,
                     trajectory: list[Path] | None = None) -> list[tuple[str, pd.DataFrame | None]]:
     """Per recording: the source of its distances (``"distance"``, ``"landmarks"``, ``"trajectory"``, ``"gnss"``) and
@@ -93,7 +119,7 @@ def calibrate_recordings(recs: list[Path], out: Path, config_path=None, *, dista
     segs = akf.model_segments_
     if akf.updated_ == "none":
         reasons = segs.loc[~segs["used"], "reason"].value_counts().to_dict() if len(segs) else {}
-        found = ", ".join(f"{n} {why}" for why, n in reasons.items()) or "no GNSS fix or known distance inside a walking bout"
+        found = ", ".join(f"{n} {why}" for why, n in reasons.items()) or _why_no_segment(steps_list, gnss_list, akf)
         raise InputError(f"calibrate: expected segments of walking of known length (GNSS fixes, distances), found none "
                          f"usable in {len(recordings)} recording(s): {found}")
     save_model(akf.model_, out, n_steps=int(round(akf.n_steps_)), distance_m=round(akf.distance_m_, 2), n_segments=int(segs["used"].sum()),

@@ -31,6 +31,7 @@ from pdr.pipelines.faults import rejected_gnss, sensor_faults, warning_line, war
 from pdr.pipelines.foot import foot_chain, foot_strides
 from pdr.pipelines.gait_forms import per_form_step_lengths
 from pdr.pipelines.leg_camera import camera_strides
+from pdr.pipelines.not_walking import drop_not_walking, gnss_only_trajectory, interval_message, not_walking_intervals
 from pdr.pipelines.steps import detect_steps, make_detector
 from pdr.report import (
     write_bouts_csv,
@@ -45,6 +46,7 @@ from pdr.report import (
     write_tum,
 )
 from pdr.step_length import choose_model
+from pdr.step_length.models import MAX_STEP_M
 
 STEP_SOURCE = "accelerometer"
 GNSS_KEYS = ("mask_intervals_s",)
@@ -111,6 +113,17 @@ def fusion_gnss(gnss: pd.DataFrame | None) -> pd.DataFrame | None:
     masked = gnss["masked"].to_numpy(bool)
     return pd.DataFrame({"t_s": gnss["t_s"], "e_m": np.where(masked, np.nan, gnss["e_m"]),
                          "n_m": np.where(masked, np.nan, gnss["n_m"]), "h_acc_m": gnss["h_acc_m"]})
+
+
+def clipped_lengths(length_m: np.ndarray, rec_id: str) -> np.ndarray:
+    """Fused step lengths within ``[0, MAX_STEP_M]``: a longer one spans a gap (a stop, missed steps, a stretch not
+    walked) whose distance the trajectory keeps; ``steps.csv`` says what a step can be."""
+    bad = (length_m < 0) | (length_m > MAX_STEP_M)
+    if bad.any():
+        warnings.warn(f"{rec_id}: {int(bad.sum())} fused step length(s) outside [0, {MAX_STEP_M:g}] m (up to "
+                      f"{float(np.max(np.abs(length_m[bad]))):.1f} m: gaps the trajectory keeps) clipped in steps.csv",
+                      stacklevel=3)
+    return np.clip(length_m, 0.0, MAX_STEP_M)
 
 
 def start_only_trajectory(t_s: float) -> pd.DataFrame:
@@ -181,6 +194,11 @@ def run_recording(rec: Path, out: Path, *, config_path=None, model_path=None, us
         lap("load_s")
 
         steps = detect_steps(recording, config).reset_index(drop=True)
+        not_walking = not_walking_intervals(steps, gnss_local(recording, settings) if use_gnss else None,
+                                            recording.subject.get("height_m"))
+        for iv in not_walking:
+            warnings.warn(interval_message(recording.id, iv), stacklevel=2)
+        steps = drop_not_walking(steps, not_walking)
         lap("steps_s")
 
         model.estimate(model.prepare(steps, recording), subject=recording.subject)
@@ -213,14 +231,22 @@ def run_recording(rec: Path, out: Path, *, config_path=None, model_path=None, us
                     gnss=fusion_gnss(gnss if gnss is None else gnss.assign(masked=gnss["masked"] | gnss_suspect)),
                     strides=strides if chain is None else chain[1], step_model=model)
         traj = fusion.trajectory_.reset_index(drop=True)
+        gnss_used = np.asarray(fusion.gnss_used_, bool) if gnss is not None else None
         if chain is not None:
             model = fusion.step_model_ if fusion.step_model_ is not None else model
         elif len(steps):
-            steps["step_length_m"] = np.asarray(fusion.step_length_m_, float)
+            steps["step_length_m"] = clipped_lengths(np.asarray(fusion.step_length_m_, float), recording.id)
             model = fusion.step_model_ if fusion.step_model_ is not None else model
         else:
-            traj = start_only_trajectory(float(recording.imu["t_s"].iloc[0]))
-        gnss_used = np.asarray(fusion.gnss_used_, bool) if gnss is not None else None
+            usable = None if gnss is None else (np.isfinite(gnss["e_m"]) & np.isfinite(gnss["n_m"]) & ~gnss["masked"]
+                                                & ~gnss_suspect).to_numpy(bool)
+            traj = gnss_only_trajectory(gnss, usable) if gnss is not None else None
+            if traj is None:
+                traj = start_only_trajectory(float(recording.imu["t_s"].iloc[0]))
+            else:
+                gnss_used = usable
+                warnings.warn(f"{recording.id}: no steps; the trajectory follows the GNSS alone ({int(usable.sum())} fixes)",
+                              stacklevel=2)
         solver = {"fusion": method, **fusion.solver_}
         stride_scales = getattr(fusion, "stride_scales_", None) or {}  # per source; the EKF does not use strides
         lap("fusion_s")
@@ -255,6 +281,7 @@ def run_recording(rec: Path, out: Path, *, config_path=None, model_path=None, us
         "solver": solver,
         "gnss": gnss_counts or {"fixes": 0, "valid": 0, "masked": 0, "jumped": 0, "used": 0},
         "warnings": warning_list,
+        "not_walking": not_walking,
     }
     step_scale = getattr(fusion, "step_scale_", None)
     if step_scale and step_scale["calibrated"]:

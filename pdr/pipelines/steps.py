@@ -10,6 +10,7 @@ import pandas as pd
 from pdr.errors import InputError
 from pdr.heading import AttitudeStepHeading
 from pdr.io.recording import Recording
+from pdr.pipelines.not_walking import min_step_rate_hz
 from pdr.signals import estimate_attitude, uniform_imu
 from pdr.steps import PeakStepDetection, WaveletStepDetection, acc_norm_signal, step_features
 
@@ -53,6 +54,10 @@ def detect_steps(rec: Recording, config: dict) -> pd.DataFrame:
     detector = make_detector(config.get("steps"), rec.placement)
     heading = AttitudeStepHeading.from_config(config.get("heading"))
     u = uniform_imu(rec.imu)
+    if u.rate_hz < min_step_rate_hz():
+        warnings.warn(f"{rec.id}: no steps: sampling rate {u.rate_hz:.1f} Hz is below twice the highest cadence "
+                      f"({min_step_rate_hz():g} Hz), so steps can not be found", stacklevel=2)
+        return empty_steps_table()
     if u.rate_hz < LOW_RATE_HZ:
         warnings.warn(f"{rec.id}: sampling rate {u.rate_hz:.1f} Hz is low (< {LOW_RATE_HZ:g} Hz): contact times are "
                       f"only good to about {1e3 / u.rate_hz:.0f} ms", stacklevel=2)

@@ -7,6 +7,7 @@ none of the output folders exists (unless ``force``), and only then writes them 
 from __future__ import annotations
 
 import contextlib
+import csv
 import lzma
 import re
 import stat
@@ -49,22 +50,72 @@ def require_dir(path: Path, what: str) -> Path:
     return path
 
 
-def read_table(path: Path, what: str, **kwargs) -> pd.DataFrame:
+_TAIL_BYTES = 1 << 16
+_EMPTY_ROW = re.compile(r'^[\s"\',;]*$')  # a row of empty cells: `""` (phyphox), `,,`, or blanks
+_CUT_NUMBER = re.compile(r"^[-+]?(\d+[.,]?\d*|[.,]\d+)([eE][-+]?\d+)?$")
+
+
+def _cells(line: str, sep: str | None) -> list[str]:
+    if sep is not None and len(sep) > 1:  # a regular expression (whitespace-separated files)
+        return re.split(sep, line.strip())
+    return next(csv.reader([line], delimiter=sep or ","), [])
+
+
+def _tail(path: Path, what: str, sep: str | None, last_break: bool) -> int:
+    """The number of empty rows (``""``) that end ``path``; an InputError when its last line looks cut off.
+
+    With ``last_break`` (the source always ends its lines with one) a last line without a line break is a cut.
+    Otherwise it is normal (Sensor Logger's ``Metadata.csv``, phyphox's data files) and a truncated file is one
+    whose last line has fewer cells than the line before it, or whose last cell is no complete
+    number while the cell above is one, or is shorter than every cell of that column in the lines before it
+    (apps write numbers of a steady width: a cut one is shorter)."""
+    size = path.stat().st_size
+    with open(path, "rb") as f:
+        f.seek(max(0, size - _TAIL_BYTES))
+        raw = f.read()
+    text = raw.decode("utf-8", errors="replace").replace("\r\n", "\n").replace("\r", "\n")
+    lines = text.split("\n")
+    if size > _TAIL_BYTES:
+        lines = lines[1:]  # the first piece may start mid-line
+    broken = not text.endswith("\n")
+    n_empty = 0
+    while lines and _EMPTY_ROW.match(lines[-1]):
+        if lines[-1].strip():
+            n_empty += 1
+            broken = False  # the row before the empty one ended with a line break
+        lines.pop()
+    if broken and last_break:
+        raise InputError(f"{what}: expected {path.name} to end with a line break, found its last line cut off "
+                         "(a truncated file? if it is complete, add a line break at its end)")
+    if not broken or len(lines) < 2:
+        return n_empty
+    last, above = _cells(lines[-1], sep), _cells(lines[-2], sep)
+    cut = len(last) < len(above)
+    if not cut and last and above:
+        cell, ref = last[-1].strip().strip('"'), above[-1].strip().strip('"')
+        if _CUT_NUMBER.match(ref):
+            rows = [_cells(line, sep) for line in lines[-21:-1]]
+            widths = [len(c[-1].strip().strip('"')) for c in rows if len(c) == len(above)]
+            cut = not _CUT_NUMBER.match(cell) or len(cell) < min(widths)
+    if cut:
+        raise InputError(f"{what}: expected complete rows in {path.name}, found its last line cut off (a truncated file?)")
+    return n_empty
+
+
+def read_table(path: Path, what: str, *, last_break: bool = True, **kwargs) -> pd.DataFrame:
     """``pd.read_csv`` whose failures (parse errors, bad encoding, empty file) become one-line InputErrors.
 
-    A file whose last line has no line break is taken as truncated (a cut inside the last number is otherwise
-    invisible); every source format handled here ends its lines with one."""
+    Empty rows at the end (phyphox writes ``""``) are dropped; a last line cut off is an error (see ``_tail``;
+    ``last_break=False`` for sources that may end without a line break)."""
     require_file(path, what)
-    with open(path, "rb") as f:
-        f.seek(-1, 2)
-        if f.read(1) not in (b"\n", b"\r"):
-            raise InputError(f"{what}: expected {path.name} to end with a line break, found its last line cut off "
-                             "(a truncated file? if it is complete, add a line break at its end)")
+    n_empty = _tail(path, what, kwargs.get("sep"), last_break)
     try:
         df = pd.read_csv(path, **kwargs)
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError, ValueError, IndexError) as exc:
         first = str(exc).splitlines()[0][:120] if str(exc) else type(exc).__name__
         raise InputError(f"{what}: expected a table in {path.name}, found unreadable content ({first})") from None
+    if n_empty and len(df) >= n_empty and df.iloc[len(df) - n_empty:].isna().all(axis=None):
+        df = df.iloc[: len(df) - n_empty]
     if len(df) == 0:
         raise InputError(f"{what}: expected data rows in {path.name}, found none")
     return df

@@ -1,5 +1,6 @@
 """Shared by the smartphone-app importers (Sensor Logger, phyphox): one IMU table from sensors on separate clocks,
-and the GNSS table with its geo origin."""
+the GNSS table with its geo origin, and the checks that name the user's file (gravity present, GNSS on the same
+clock)."""
 
 from __future__ import annotations
 
@@ -9,20 +10,51 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from pdr.constants import GRAVITY_MPS2
 from pdr.errors import InputError
 from pdr.io.importers._common import imu_frame, increasing_mask, interp_columns, require_finite, steady_clock
+from pdr.io.recording import ACC_G_MEDIAN_RANGE, ACC_MPS2_MEDIAN_RANGE
 
 Series = tuple[np.ndarray, np.ndarray]  # (t_s increasing, values (N, k))
 MIN_OVERLAP_S = 0.5
+MIN_STEADY_FRACTION = 0.7  # gravity dominates a 1 s mean (walking moves the phone's tilt by tens of degrees at most)
+MAX_GNSS_OUTSIDE_S = 60.0  # a first fix may come a while after the start tap; hours away is another clock
 
 
 def clean_series(t: np.ndarray, values: np.ndarray, what: str) -> Series:
     """Finite values required (an empty cell means a damaged or truncated file), then strictly increasing time:
     repeated or back-stepping samples are dropped with a warning."""
-    values = np.asarray(values, float).reshape(len(t), -1)
+    values = np.asarray(values, float)
+    values = values.reshape(len(t), values.shape[1] if values.ndim == 2 else -1)
     require_finite(np.column_stack([t, values]), what, "time and values")
     keep = increasing_mask(t, what)
     return t[keep], values[keep]
+
+
+def steady_fraction(t_s: np.ndarray, acc: np.ndarray, window_s: float = 1.0) -> float:
+    """Median over ``window_s`` windows of |mean vector| / mean |a|: near 1 when a steady vector (gravity) dominates,
+    near 0 for acceleration without gravity (the body's accelerations average out over a step or two)."""
+    if len(t_s) < 2:
+        return 1.0
+    edges = np.arange(t_s[0], t_s[-1] + window_s, window_s)
+    idx = np.searchsorted(t_s, edges)
+    norm = np.linalg.norm(acc, axis=1)
+    ratios = [np.linalg.norm(acc[a:b].mean(axis=0)) / norm[a:b].mean() for a, b in zip(idx[:-1], idx[1:])
+              if b - a >= 3 and norm[a:b].mean() > 0]
+    return float(np.median(ratios)) if ratios else 1.0
+
+
+def require_gravity(t_s: np.ndarray, acc_mps2: np.ndarray, what: str, hint: str = "") -> None:
+    """Refuse, naming the user's file, acceleration without gravity (median |a| near 2 m/s² instead of 9.8: the
+    phone's "linear acceleration") and acceleration in g labelled m/s². Data in g and linear acceleration both have
+    median |a| near 1 m/s² at times; gravity is the steady part (``steady_fraction`` >= ``MIN_STEADY_FRACTION``)."""
+    med = float(np.median(np.linalg.norm(acc_mps2, axis=1))) if len(acc_mps2) else float("nan")
+    if med < ACC_MPS2_MEDIAN_RANGE[0] and steady_fraction(t_s, acc_mps2) < MIN_STEADY_FRACTION:
+        raise InputError(f"{what}: expected acceleration including gravity (median |a| near {GRAVITY_MPS2} m/s²), found "
+                         f"median |a| = {med:.2f} m/s² with no steady gravity: linear acceleration (gravity removed){hint}")
+    if ACC_G_MEDIAN_RANGE[0] <= med <= ACC_G_MEDIAN_RANGE[1]:
+        raise InputError(f"{what}: expected acceleration in m/s² (median |a| near {GRAVITY_MPS2}), found median |a| = "
+                         f"{med:.3f}: the data look like g")
 
 
 def combine_imu(acc: Series, gyr: Series | None, mag: Series | None, baro: Series | None, what: str) -> pd.DataFrame:
@@ -50,6 +82,17 @@ def combine_imu(acc: Series, gyr: Series | None, mag: Series | None, baro: Serie
     if baro is not None and len(baro[0]) >= 1:
         p = np.interp(t, baro[0], baro[1][:, 0])
     return imu_frame(t, a, g, m, p)
+
+
+def require_overlap(gnss_t_s: np.ndarray, imu_t_s: np.ndarray, what: str) -> None:
+    """Fixes none of which falls within the motion recording (give or take ``MAX_GNSS_OUTSIDE_S``) are on another
+    clock: refused rather than kept unused."""
+    if len(gnss_t_s) and len(imu_t_s):
+        near = (gnss_t_s >= imu_t_s[0] - MAX_GNSS_OUTSIDE_S) & (gnss_t_s <= imu_t_s[-1] + MAX_GNSS_OUTSIDE_S)
+        if not near.any():
+            gap = min(abs(gnss_t_s[0] - imu_t_s[-1]), abs(imu_t_s[0] - gnss_t_s[-1]))
+            raise InputError(f"{what}: expected fixes during the motion recording ({imu_t_s[0]:.1f} to {imu_t_s[-1]:.1f} s), "
+                             f"found all of them {gap:.1f} s away (a clock on another origin, or two exports mixed)")
 
 
 def gnss_table(t: np.ndarray, lat: np.ndarray, lon: np.ndarray, alt: np.ndarray | None, h_acc: np.ndarray | None,

@@ -1,0 +1,105 @@
+"""Not walking: vehicle and bicycle stretches inside a simulated phone walk, and a recording too slow for steps.
+
+The stretches are built at test time from a simulated walk with a stop: during the stop the phone gets the
+vibration of a car (broadband, with 1.5 Hz body bounce) or the pedalling of a bicycle (1.4 Hz sway), and the GNSS
+moves on at the vehicle's speed, every later fix shifted by the distance driven."""
+
+from __future__ import annotations
+
+import json
+import warnings
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from pdr.cli.main import main
+from pdr.io.recording import load_recording, save_recording
+from pdr.pipelines.run import run_recording
+from pdr.sim.simulator import simulate
+
+WALK_S, RIDE_S = 60.0, 120.0
+
+
+def _scenario() -> dict:
+    return {"simulation": {"id": "ride"}, "subject": {"height_m": 1.72},
+            "route": {"waypoints_m": [[0.0, 0.0], [400.0, 0.0]], "loop": False},
+            "segment": [{"duration_s": WALK_S, "speed_mps": 1.3}, {"duration_s": RIDE_S, "speed_mps": 0.0},
+                        {"duration_s": WALK_S, "speed_mps": 1.3}],
+            "imu": [{"placement": "hand", "rate_hz": 100.0}],
+            "gnss": {"enabled": True, "noise_m": 1.5, "markov_sigma_m": 2.0, "markov_tau_s": 60.0}}
+
+
+def _ride(rec, kind: str, speed_mps: float, seed: int = 3):
+    """The stop of ``rec`` turned into a ride of ``kind`` ("car" or "bicycle") at ``speed_mps`` heading north."""
+    rng = np.random.default_rng(seed)
+    imu = rec.imu.copy()
+    t = imu["t_s"].to_numpy()
+    a, b = WALK_S + 2.0, WALK_S + RIDE_S - 2.0
+    w = (t >= a) & (t <= b)
+    n = int(w.sum())
+    if kind == "car":
+        shake = np.cumsum(rng.normal(0.0, 0.6, (n, 3)), axis=0)
+        shake -= pd.DataFrame(shake).rolling(25, center=True, min_periods=1).mean().to_numpy()
+        bounce = 1.2 * np.sin(2 * np.pi * 1.5 * t[w] + rng.uniform(0, 6))[:, None] * np.array([0.2, 0.3, 1.0])
+        extra = shake + bounce
+    else:
+        phase = 2 * np.pi * 1.4 * t[w]
+        extra = np.column_stack([0.8 * np.sin(phase), 0.3 * np.sin(2 * phase), 0.5 * np.sin(2 * phase + 0.4)])
+    for j, c in enumerate(("acc_x_mps2", "acc_y_mps2", "acc_z_mps2")):
+        imu.loc[w, c] = imu.loc[w, c].to_numpy() + extra[:, j]
+    gnss = rec.gnss.copy()
+    tg = gnss["t_s"].to_numpy()
+    north_m = speed_mps * np.clip(tg - a, 0.0, b - a)
+    gnss["lat_deg"] = gnss["lat_deg"] + np.degrees(north_m / 6_378_137.0)
+    rec.imu = imu
+    rec.gnss = gnss
+    return rec, (a, b)
+
+
+@pytest.mark.parametrize("kind, speed_mps", [("car", 6.0), ("bicycle", 4.5)])
+def test_vehicle_and_bicycle_stretches_have_no_steps_and_a_warning(tmp_path, kind, speed_mps):
+    rec = simulate(_scenario(), seed=1)
+    truth = rec.reference["steps"]["t_s"].to_numpy()
+    rec, (a, b) = _ride(rec, kind, speed_mps)
+    path = save_recording(rec, tmp_path / "rec")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        summary = run_recording(path, tmp_path / "out")
+    messages = [str(w.message) for w in caught]
+    steps = pd.read_csv(tmp_path / "out" / "steps.csv")
+    t = steps["t_s"].to_numpy()
+    assert not ((t > a) & (t < b)).any()
+    intervals = summary["not_walking"]
+    assert len(intervals) == 1 and intervals[0]["t_start_s"] < a + 10 and intervals[0]["t_end_s"] > b - 10
+    assert sum("not walking from" in m for m in messages) == 1
+    assert steps["step_length_m"].between(0.0, 2.0).all()  # clipped means clipped
+    # the walks on either side keep their steps (the interval may take a window's width of them)
+    assert len(steps) >= 0.8 * len(truth)
+    gnss_dist = speed_mps * (b - a)
+    assert summary["distance_m"] > 0.8 * gnss_dist
+    json.loads((tmp_path / "out" / "summary.json").read_text())
+
+
+def test_five_hz_recording_follows_the_gnss_and_says_why(tmp_path):
+    sc = _scenario()
+    sc["segment"] = [{"duration_s": 180.0, "speed_mps": 1.3}]
+    rec = simulate(sc, seed=2)
+    block = 20  # 100 Hz -> 5 Hz: the mean of each 0.2 s, as a phone's low-rate sensor delivers it
+    imu = rec.imu.iloc[: len(rec.imu) // block * block]
+    rec.imu = imu.groupby(np.arange(len(imu)) // block).mean().reset_index(drop=True)
+    path = save_recording(rec, tmp_path / "rec")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        summary = run_recording(path, tmp_path / "out")
+    messages = " ".join(str(w.message) for w in caught)
+    assert summary["n_steps"] == 0
+    assert "below twice the highest cadence" in messages and "follows the GNSS alone" in messages
+    truth_m = 1.3 * 180.0
+    assert 0.85 * truth_m < summary["distance_m"] < 1.3 * truth_m
+    assert summary["gnss"]["used"] > 150
+    traj = pd.read_csv(tmp_path / "out" / "trajectory.csv")
+    assert len(traj) == summary["gnss"]["used"]
+    assert load_recording(path).sample_rate_hz == pytest.approx(5.0)
+    with pytest.warns(UserWarning, match=r"5.0 Hz is below twice the highest cadence \(7 Hz\)"):
+        assert main(["validate", str(path)]) == 0
