@@ -26,9 +26,9 @@ def _cmd_import(args: argparse.Namespace) -> int:
 
 
 def _cmd_validate(args: argparse.Namespace) -> int:
-    from pdr.io.recording import load_recording
+    from pdr.pipelines.check import check_recording
 
-    rec = load_recording(args.rec)
+    rec = check_recording(args.rec)
     parts = [f"{len(rec.imu)} IMU samples at {rec.sample_rate_hz:.1f} Hz", f"placement {rec.placement}"]
     parts += [f"imu_{k}" for k in rec.extra_imus]
     if rec.gnss is not None:

@@ -9,6 +9,7 @@ the end (no half-written output, ever).
 
 from __future__ import annotations
 
+import copy
 import hashlib
 import time
 import warnings
@@ -25,7 +26,8 @@ from pdr.fusion import EkfFusion, FactorGraphFusion, IncrementalFusion
 from pdr.geo import latlon_to_en
 from pdr.heading import AttitudeStepHeading
 from pdr.io.atomic import atomic_dir
-from pdr.io.recording import Recording, load_recording
+from pdr.io.recording import Recording
+from pdr.pipelines.check import check_recording
 from pdr.pipelines.faults import rejected_gnss, sensor_faults, warning_line, warning_objects, widen_steps
 from pdr.pipelines.foot import foot_strides
 from pdr.pipelines.gait_forms import per_form_step_lengths
@@ -170,11 +172,12 @@ def run_recording(rec: Path, out: Path, *, config_path=None, model_path=None, us
 
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        recording = load_recording(rec, with_reference=False)
+        recording = check_recording(rec, with_reference=False)
         config = load_config(config_path)
         settings = gnss_settings(config)
         method, fusion = make_fusion(config.get("fusion"))
         model = load_model(model_path) if model_path is not None else model_from_config(config)
+        model_given = {"model": type(model).__name__, "params": copy.deepcopy(model.get_params())}  # run.json: the input
         lap("load_s")
 
         steps = detect_steps(recording, config).reset_index(drop=True)
@@ -209,6 +212,7 @@ def run_recording(rec: Path, out: Path, *, config_path=None, model_path=None, us
         traj = fusion.trajectory_.reset_index(drop=True)
         if len(steps):
             steps["step_length_m"] = np.asarray(fusion.step_length_m_, float)
+            steps["heading_rad"] = traj["heading_rad"].to_numpy(float)[1:]  # the fused east-north heading of each step
             model = fusion.step_model_ if fusion.step_model_ is not None else model
         else:
             traj = start_only_trajectory(float(recording.imu["t_s"].iloc[0]))
@@ -231,7 +235,8 @@ def run_recording(rec: Path, out: Path, *, config_path=None, model_path=None, us
     if gnss is not None:
         valid = np.isfinite(gnss["e_m"].to_numpy()) & np.isfinite(gnss["n_m"].to_numpy())
         gnss_counts = {"fixes": len(gnss), "valid": int(valid.sum()), "masked": int((gnss["masked"] & valid).sum()),
-                       "jumped": int((gnss_suspect & valid).sum()), "used": int(gnss_used.sum())}
+                       "jumped": int((gnss_suspect & ~faults.gnss_inaccurate_ & valid).sum()),
+                       "inaccurate": int((faults.gnss_inaccurate_ & valid).sum()), "used": int(gnss_used.sum())}
     step_model = {"model": type(model).__name__, "params": model.get_params()}
     summary: dict[str, Any] = {
         "recording_id": recording.id,
@@ -242,7 +247,7 @@ def run_recording(rec: Path, out: Path, *, config_path=None, model_path=None, us
         "walking_duration_s": float(steps["t_s"].iloc[-1] - steps["t_s"].iloc[0]) if len(steps) > 1 else 0.0,
         "step_model": step_model,
         "solver": solver,
-        "gnss": gnss_counts or {"fixes": 0, "valid": 0, "masked": 0, "jumped": 0, "used": 0},
+        "gnss": gnss_counts or {"fixes": 0, "valid": 0, "masked": 0, "jumped": 0, "inaccurate": 0, "used": 0},
         "warnings": warning_list,
     }
     step_scale = getattr(fusion, "step_scale_", None)
@@ -264,7 +269,7 @@ def run_recording(rec: Path, out: Path, *, config_path=None, model_path=None, us
         "options": {"use_gnss": use_gnss, "plot": plot},
         "config": {"input": config, "steps": make_detector(config.get("steps"), recording.placement).get_params(),
                    "heading": AttitudeStepHeading.from_config(config.get("heading")).get_params(),
-                   "gnss": settings, "step_length": step_model, "faults": faults.get_params(),
+                   "gnss": settings, "step_length": model_given, "faults": faults.get_params(),
                    "fusion": {"method": method, "params": fusion.get_params()}},
     }
 
