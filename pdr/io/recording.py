@@ -267,6 +267,9 @@ def _validate_meta(meta: dict[str, Any], what: str) -> None:
     rec = meta.get("recording")
     if not isinstance(rec, dict) or "id" not in rec:
         raise InputError(f"{what}: expected a [recording] table with id, found {sorted(meta) or 'nothing'}")
+    start = rec.get("start_unix_s")
+    if start is not None and (isinstance(start, bool) or not isinstance(start, (int, float)) or not np.isfinite(start)):
+        raise InputError(f"{what}: expected [recording] start_unix_s a number (Unix time of t_s = 0, s), found {start!r}")
     placement = rec.get("placement", "unknown")
     if placement not in PLACEMENTS:
         raise InputError(f"{what}: expected placement one of {', '.join(PLACEMENTS)}, found {placement!r}")
@@ -319,7 +322,7 @@ def _load_reference(ref_dir: Path) -> dict[str, Any]:
         path = ref_dir / f"{name}.csv"
         if path.is_file():
             what = f"{ref_dir}/{name}.csv"
-            df = read_csv(path, what)
+            df = read_csv(path, what, empty_is_missing=True)
             missing = [c for c in required if c not in df.columns]
             if missing:
                 raise InputError(f"{what}: expected columns {', '.join(required)}, found {', '.join(df.columns)}")

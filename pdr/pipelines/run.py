@@ -4,7 +4,8 @@ Stages (each timed in ``summary.json``): load (never ``reference/``) -> steps (`
 (``--model`` or ``[step_length]``) -> strides (foot IMUs ``[foot]``, leg camera ``[flow]``/``[slip]``) -> GNSS in the local
 frame (``--no-gnss``, ``[gnss] mask_intervals_s``) -> fusion (``[fusion] method = "graph" | "incremental" | "ekf"`` plus
 that class's parameters; default the batch factor graph) -> outputs, written in a temporary folder renamed onto OUT at
-the end (no half-written output, ever).
+the end (no half-written output, ever). An existing OUT needs ``--force``; then only the files ``pdr run`` writes are
+replaced in it.
 """
 
 from __future__ import annotations
@@ -25,7 +26,7 @@ from pdr.errors import InputError, check_keys
 from pdr.fusion import EkfFusion, FactorGraphFusion, IncrementalFusion
 from pdr.geo import latlon_to_en
 from pdr.heading import AttitudeStepHeading
-from pdr.io.atomic import atomic_dir
+from pdr.io.atomic import atomic_outputs
 from pdr.io.recording import Recording
 from pdr.pipelines.check import check_recording
 from pdr.pipelines.faults import rejected_gnss, sensor_faults, warning_line, warning_objects, widen_steps
@@ -49,6 +50,8 @@ STEP_SOURCE = "accelerometer"
 GNSS_KEYS = ("mask_intervals_s",)
 FUSION_METHODS = {"graph": FactorGraphFusion, "incremental": IncrementalFusion, "ekf": EkfFusion}
 HASH_CHUNK_BYTES = 1 << 20
+RUN_OUTPUT_FILES = ("steps.csv", "strides.csv", "trajectory.csv", "trajectory.geojson", "trajectory.tum", "trajectory.gpx",
+                    "trajectory.png", "run.json", "summary.json")  # --force replaces these in OUT, nothing else
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -137,15 +140,17 @@ def input_hashes(rec_dir: Path) -> dict[str, str]:
 
 
 def _check_output(out: Path, force: bool) -> None:
-    """OUT may be new, empty, a previous ``pdr run`` output (it has ``run.json``), or anything with ``--force``."""
-    if not out.exists() or force:
+    """OUT may be new or empty; an existing one (an earlier run, the user's folder) needs ``--force``, and then only
+    the files ``pdr run`` writes (``RUN_OUTPUT_FILES``) are replaced: the user's own files in it stay."""
+    if not out.exists():
         return
     if not out.is_dir():
-        raise InputError(f"{out}: expected an output folder, found a file (use --force to replace it)")
-    if (out / "run.json").is_file() or not any(out.iterdir()):
+        raise InputError(f"{out}: expected an output folder, found a file")
+    if force or not any(out.iterdir()):
         return
-    raise InputError(f"{out}: expected a new output folder or a previous pdr run output (with run.json), "
-                     f"found a folder with other content (use --force to replace it)")
+    kind = "an earlier pdr run output" if (out / "run.json").is_file() else "a folder with other files"
+    raise InputError(f"{out}: expected a new or empty output folder, found {kind} (use --force to replace the files "
+                     f"pdr run writes; other files in it are kept)")
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -273,7 +278,7 @@ def run_recording(rec: Path, out: Path, *, config_path=None, model_path=None, us
                    "fusion": {"method": method, "params": fusion.get_params()}},
     }
 
-    with atomic_dir(out, force=True) as tmp:
+    with atomic_outputs(out, RUN_OUTPUT_FILES) as tmp:
         write_steps_csv(tmp / "steps.csv", steps)
         if strides is not None:
             write_strides_csv(tmp / "strides.csv", strides)
@@ -281,7 +286,8 @@ def run_recording(rec: Path, out: Path, *, config_path=None, model_path=None, us
         write_geojson(tmp / "trajectory.geojson", traj, origin, name=recording.id)
         write_tum(tmp / "trajectory.tum", traj)
         if origin is not None:
-            write_gpx(tmp / "trajectory.gpx", traj, origin, name=recording.id)
+            write_gpx(tmp / "trajectory.gpx", traj, origin, name=recording.id,
+                      start_unix_s=recording.meta["recording"].get("start_unix_s"))
         if plot:
             plot_gnss = None
             if gnss is not None:
