@@ -3,7 +3,7 @@
 An example is a fenced block right after a line ``<!-- example -->``, or ``<!-- example: slow -->`` for one that takes
 minutes (run with ``--all``; ``make test`` checks the others, ``tests/test_readme_examples.py``). Each ``$ `` line of
 the block is a command, run by bash in one scratch folder shared by all examples in README order, with this
-checkout's ``pdr`` first; the lines after it, up to the next ``$ ``, are what it prints (stdout and stderr together).
+checkout's ``pdr`` first and ``configs/`` linked in; the lines after it, up to the next ``$ ``, are what it prints (stdout and stderr together).
 Speeds (``frames/s``) and the scratch folder's path are masked before comparing.
 
     python docs/readme_examples.py            # check the fast examples; exit 1 and a diff when one drifted
@@ -88,6 +88,7 @@ def check(readme: Path = README, *, run_slow: bool = False, update: bool = False
     replacements: list[tuple[int, int, list[str]]] = []
     with tempfile.TemporaryDirectory(prefix="pdr_readme_") as tmp:
         scratch = Path(scratch or tmp).resolve()
+        (scratch / "configs").symlink_to(ROOT / "configs")  # the examples name configs/ as from the repository root
         for example in parse(lines):
             if example.slow and not run_slow:
                 continue
