@@ -33,7 +33,7 @@ def _rows(case: str, summary: dict, metrics: dict, elapsed: float, anchor_positi
     rows = [{"area": "run", "case": case, "metric": "end-to-end time (run, plot included)", "ours": round(elapsed, 2), "unit": "s",
              "target": "", "anchor": f"{summary['n_steps']} steps, {summary['duration_s']:.0f} s of data"}]
     spec = [
-        ("step_count_error_pct", "step count error", "%", "", ""),
+        ("step_count_error_pct", "step count error (signed)", "%", "", ""),
         ("step_f1", f"step timing F1 (+-{metrics.get('step_f1_tolerance_s', '')} s)", "", "", ""),
         ("distance_error_pct", "distance error", "%", "", LADETTO + (
             f"; here calibrated in the graph from {summary['gnss']['used']} GNSS fixes" if summary["gnss"]["used"]

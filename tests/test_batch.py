@@ -253,8 +253,9 @@ def test_bad_arguments(recordings, tmp_path, capsys):
     walk = str(recordings[0])
     assert main(["batch", walk, walk, "-o", str(tmp_path / "o")]) == 1
     assert "expected each recording once" in capsys.readouterr().err
-    assert main(["batch", walk, "-o", str(tmp_path / "o"), "--workers", "0"]) == 1
-    assert "--workers: expected at least 1, found 0" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exc:  # a usage error
+        main(["batch", walk, "-o", str(tmp_path / "o"), "--workers", "0"])
+    assert exc.value.code == 2 and "--workers: expected a whole number >= 1, found '0'" in capsys.readouterr().err
     assert main(["batch", walk, "-o", str(tmp_path / "o"), "--scheduler", "tcp://127.0.0.1:1"]) == 1
     assert "--scheduler: expected it with --engine dask only" in capsys.readouterr().err
     assert main(["batch", walk, "-o", str(tmp_path / "o"), "--config", str(tmp_path / "missing.toml")]) == 1

@@ -58,7 +58,7 @@ def test_known_metric_values_origin_heading(tmp_path):
     m = evaluate_run(out, rec)
     assert m["n_steps"] == 53 and m["n_steps_ref"] == 60
     assert m["step_count_error"] == -7
-    assert m["step_count_error_pct"] == pytest.approx(100 * 7 / 60)
+    assert m["step_count_error_pct"] == pytest.approx(-100 * 7 / 60)  # signed, like step_count_error
     assert m["step_f1_tolerance_s"] == 0.25
     assert m["step_precision"] == pytest.approx(50 / 53) and m["step_recall"] == pytest.approx(50 / 60)
     assert m["step_f1"] == pytest.approx(2 * 50 / (53 + 60))

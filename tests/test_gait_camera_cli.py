@@ -121,19 +121,19 @@ def test_bad_input_gets_one_line_and_nothing_written(made, tmp_path, capsys):
     assert not (tmp_path / "t.json").exists()
 
 
-def test_a_folder_without_corners_in_view_gives_a_warning_and_empty_results(made, tmp_path):
+def test_a_folder_without_corners_in_view_gives_a_warning_and_empty_results(made, tmp_path, capsys):
     blind = tmp_path / "blind"
     shutil.copytree(made / "walk", blind)
     (blind / "observations.csv").write_text("frame,point_id,u_px,v_px\n")
-    with pytest.warns(UserWarning, match="fewer than 4 known points"):
-        assert main(["gait-camera", "estimate", str(blind), "--templates", str(made / "templates.json"),
-                     "-o", str(tmp_path / "out")]) == 0
+    assert main(["gait-camera", "estimate", str(blind), "--templates", str(made / "templates.json"),
+                 "-o", str(tmp_path / "out")]) == 0
+    assert "warning:" in capsys.readouterr().err  # fewer than 4 known points in every frame
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert summary["n_cycles"] == 0 and summary["form_frames"] == {} and summary["median_reprojection_error_px"] is None
     assert len(pd.read_csv(tmp_path / "out" / "cycles.csv")) == 0
     (blind / "frames.csv").write_text("t_s\n")  # no frame at all
-    with pytest.warns(UserWarning, match="no frames"):
-        assert main(["gait-camera", "estimate", str(blind), "--templates", str(made / "templates.json"),
-                     "-o", str(tmp_path / "out0")]) == 0
+    assert main(["gait-camera", "estimate", str(blind), "--templates", str(made / "templates.json"),
+                 "-o", str(tmp_path / "out0")]) == 0
+    assert "no frames" in capsys.readouterr().err
     assert json.loads((tmp_path / "out0" / "summary.json").read_text())["n_frames"] == 0
 

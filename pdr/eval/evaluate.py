@@ -63,7 +63,7 @@ def _step_metrics(est_steps: pd.DataFrame, ref: dict[str, Any], tolerance_s: flo
         m["n_steps_ref"] = n_ref
         m["step_count_error"] = n_est - n_ref
         if n_ref > 0:
-            m["step_count_error_pct"] = 100.0 * abs(n_est - n_ref) / n_ref
+            m["step_count_error_pct"] = 100.0 * (n_est - n_ref) / n_ref
     if ref_steps is not None:
         t_ref = ref_steps["t_s"].to_numpy(float)
         t_est = est_steps["t_s"].to_numpy(float)
@@ -195,7 +195,7 @@ def evaluate_run(out: Path, rec: Path, *, step_tolerance_s: float = STEP_F1_TOLE
     """Metrics of the ``pdr run`` output folder ``out`` against ``rec/reference/`` (see the module docstring).
 
     Keys (each present only when its reference exists): ``n_steps``, ``n_steps_ref``, ``step_count_error`` (estimated
-    minus reference), ``step_count_error_pct`` (absolute, % of reference), ``step_f1`` / ``step_precision`` /
+    minus reference), ``step_count_error_pct`` (signed like it, % of reference: negative = steps missed), ``step_f1`` / ``step_precision`` /
     ``step_recall`` with ``step_f1_tolerance_s``, ``step_length_mae_m``, ``stride_length_mae_m``, ``distance_m``,
     ``distance_ref_m``, ``distance_error_pct`` (signed), ``ate_rmse_m`` with ``alignment``, ``final_error_m`` /
     ``final_error_pct`` (% of the reference distance), ``landmark_error_mean_m`` / ``_max_m`` / ``_mean_pct`` / ``_max_pct``,

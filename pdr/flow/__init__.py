@@ -7,8 +7,8 @@ from pdr.flow.methods import (
     InterpolationOpticalFlow,
     PhaseCorrelationOpticalFlow,
 )
-from pdr.flow.video import read_video
+from pdr.flow.video import check_video, read_video
 
 __all__ = [
-    "CameraModel",    "FLOW_COLUMNS", "CorrelationOpticalFlow", "InterpolationOpticalFlow", "PhaseCorrelationOpticalFlow", "read_video",
+    "CameraModel",    "FLOW_COLUMNS", "CorrelationOpticalFlow", "InterpolationOpticalFlow", "PhaseCorrelationOpticalFlow", "check_video", "read_video",
 ]

@@ -103,6 +103,32 @@ def with_deep_stack(fn, *args):
     return out["value"]
 
 
+def chain_position_std(graph: gtsam.NonlinearFactorGraph, poses: np.ndarray) -> np.ndarray:
+    """(N + 1, 2) east/north std of the poses from the start prior and the step factors alone (first-order
+    propagation in the tangent space, ``P_k+1 = Ad(T^-1) P_k Ad(T^-1)^T + Q_k`` with ``T`` the measured step; Barfoot,
+    *State Estimation for Robotics*, 2017, sec. 7.3): the exact marginals of the step chain, so upper bounds of those
+    of a graph with further factors. A position is never farther from the start than the distance walked, so no std
+    exceeds that distance (a linearised heading std of several radians says no more than that)."""
+    prior, steps = None, {}
+    for i in range(graph.size()):
+        factor = graph.at(i)
+        if isinstance(factor, gtsam.PriorFactorPose2) and factor.keys()[0] == factors.pose_key(0):
+            prior = factor.noiseModel().covariance()
+        elif isinstance(factor, gtsam.BetweenFactorPose2):
+            steps[factor.keys()[0]] = factor
+    cov = np.array(prior, float)
+    out = np.empty((len(poses), 2))
+    walked = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(poses[:, :2], axis=0), axis=1))])
+    for k, pose in enumerate(poses):
+        if k > 0:
+            step = steps[factors.pose_key(k - 1)]
+            adjoint = step.measured().inverse().AdjointMap()
+            cov = adjoint @ cov @ adjoint.T + step.noiseModel().covariance()
+        std = np.sqrt(np.maximum(np.diag(factors.world_position_cov(cov, pose[2])), 0.0))
+        out[k] = np.minimum(std, max(walked[k], float(np.sqrt(prior[0, 0]))))
+    return out
+
+
 def gate(d2: np.ndarray, threshold: float, max_run: int) -> np.ndarray:
     """Chi-square gate of the fixes (in time order), except that a run of more than ``max_run`` consecutive rejected
     fixes is kept: outliers come alone, a long consistent run means the path, not the fixes, is wrong."""
@@ -742,10 +768,11 @@ class FactorGraphFusion(Algorithm):
         try:
             marginals = with_deep_stack(gtsam.Marginals, graph, values)
         except RuntimeError as exc:
-            warnings.warn(f"fusion: marginal covariances unavailable ({str(exc).splitlines()[0]}); "
-                          "e_std_m/n_std_m are NaN",
-                          stacklevel=3)
-            return np.full((len(poses), 2), np.nan)
+            reason = " ".join(str(exc).strip().split("\n\n")[0].split()) or type(exc).__name__
+            warnings.warn(f"fusion: gtsam marginal covariances unavailable ({reason}); e_std_m/n_std_m propagated "
+                          "along the step chain from the start pose's prior instead (magnetometer, stride and GNSS "
+                          "factors ignored: upper bounds)", stacklevel=3)
+            return chain_position_std(graph, poses)
         out = np.empty((len(poses), 2))
         for i, p in enumerate(poses):
             cov = factors.world_position_cov(marginals.marginalCovariance(factors.pose_key(i)), p[2])

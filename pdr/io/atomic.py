@@ -1,4 +1,8 @@
-"""Nothing half-written: every output goes to a temporary name in the same folder, then is renamed."""
+"""Nothing half-written: every output goes to a temporary name in the same folder, then is renamed.
+
+A place that cannot be written (a read-only folder, a path under a file, a full disk) is an :class:`UnwritableOutput`:
+one line that names the user's path (never the temporary one) and the system's reason.
+"""
 
 from __future__ import annotations
 
@@ -7,7 +11,7 @@ import os
 import shutil
 import tempfile
 from pathlib import Path
-from typing import Iterator
+from typing import Iterable, Iterator
 
 import pandas as pd
 
@@ -26,18 +30,46 @@ DIR_MODE = 0o777 & ~_process_umask()
 CSV_DIGITS = 9  # significant digits of the floats in the CSV tables
 
 
+class UnwritableOutput(InputError):
+    """An output that cannot be written where the user asked; ``reason`` is the system's words."""
+
+    def __init__(self, dest: Path, reason: str):
+        super().__init__(f"{dest}: expected a place where the output can be written, found it cannot ({reason})")
+        self.reason = reason
+
+
+@contextlib.contextmanager
+def _named_as(dest: Path, tmp: Path | None = None) -> Iterator[None]:
+    """OSErrors about ``dest`` or the temporary ``tmp`` (and UnwritableOutput of files inside ``tmp``) re-raised as
+    one UnwritableOutput naming ``dest``."""
+    try:
+        yield
+    except UnwritableOutput as exc:
+        raise UnwritableOutput(dest, exc.reason) from None
+    except OSError as exc:
+        names = [str(p) for p in (dest, dest.parent, tmp) if p is not None]
+        if exc.filename is not None and not any(str(exc.filename).startswith(n) for n in names):
+            raise  # a file read inside the block, not the output
+        blocker = next((p for p in dest.parents if p.is_file()), None)
+        if blocker is not None:
+            raise UnwritableOutput(dest, f"{blocker} is a file, not a folder") from None
+        raise UnwritableOutput(dest, exc.strerror or str(exc) or type(exc).__name__) from None
+
+
 @contextlib.contextmanager
 def atomic_path(dest: str | Path) -> Iterator[Path]:
     """Yield a temporary file path beside ``dest``; rename it onto ``dest`` only if the block succeeds."""
     dest = Path(dest)
-    dest.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{dest.name}.", suffix=".tmp", dir=dest.parent)
-    os.close(fd)
+    with _named_as(dest):
+        dest.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{dest.name}.", suffix=".tmp", dir=dest.parent)
+        os.close(fd)
     tmp_path = Path(tmp)
-    tmp_path.chmod(FILE_MODE)
     try:
-        yield tmp_path
-        os.replace(tmp_path, dest)
+        with _named_as(dest, tmp_path):
+            tmp_path.chmod(FILE_MODE)
+            yield tmp_path
+            os.replace(tmp_path, dest)
     finally:
         tmp_path.unlink(missing_ok=True)
 
@@ -62,17 +94,50 @@ def atomic_dir(dest: str | Path, *, force: bool = False) -> Iterator[Path]:
     dest = Path(dest)
     if dest.exists() and not force:
         raise InputError(f"{dest}: expected a new output folder, found an existing one (use --force to replace it)")
-    dest.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{dest.name}.", suffix=".tmp", dir=dest.parent))
-    tmp.chmod(DIR_MODE)
+    with _named_as(dest):
+        dest.parent.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=f".{dest.name}.", suffix=".tmp", dir=dest.parent))
     try:
-        yield tmp
-        if dest.exists():
-            old = dest.with_name(f".{dest.name}.old-{os.getpid()}")
-            os.replace(dest, old)
-            os.replace(tmp, dest)
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            os.replace(tmp, dest)
+        with _named_as(dest, tmp):
+            tmp.chmod(DIR_MODE)
+            yield tmp
+            if dest.exists():
+                old = dest.with_name(f".{dest.name}.old-{os.getpid()}")
+                os.replace(dest, old)
+                os.replace(tmp, dest)
+                shutil.rmtree(old, ignore_errors=True)
+            else:
+                os.replace(tmp, dest)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+@contextlib.contextmanager
+def atomic_outputs(dest: str | Path, owned: Iterable[str]) -> Iterator[Path]:
+    """Yield an empty temporary folder beside ``dest`` for files named in ``owned``; on success they replace those of
+    ``dest``.
+
+    A new ``dest`` is the temporary folder renamed (atomic). In an existing folder each written file is renamed onto
+    its name, then the ``owned`` files this run did not write (the plot of an earlier run) are removed; every other
+    file of ``dest`` (the user's own) is left alone. A failure inside the block leaves ``dest`` as it was.
+    """
+    dest, owned = Path(dest), set(owned)
+    if not dest.exists():
+        with atomic_dir(dest) as tmp:
+            yield tmp
+        return
+    with _named_as(dest):
+        tmp = Path(tempfile.mkdtemp(prefix=f".{dest.name}.", suffix=".tmp", dir=dest.parent))
+    try:
+        with _named_as(dest, tmp):
+            tmp.chmod(DIR_MODE)
+            yield tmp
+            written = {p.name for p in tmp.iterdir()}
+            if written - owned:
+                raise RuntimeError(f"atomic_outputs: wrote {', '.join(sorted(written - owned))}, not among the owned files")
+            for name in sorted(written):
+                os.replace(tmp / name, dest / name)
+            for name in sorted(owned - written):
+                (dest / name).unlink(missing_ok=True)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)

@@ -51,6 +51,15 @@ GYR_MAX_PLAUSIBLE_RADPS = 40.0  # 2,300 deg/s: beyond any human segment; larger 
 MAG_UT_MEDIAN_RANGE = (5.0, 500.0)  # the Earth's field is 25-65 µT; indoors 5-500
 BARO_HPA_RANGE = (250.0, 1100.0)
 MAX_DT_SPREAD = 4.0  # interquartile ratio of sample intervals above which the rate "varies wildly"
+# An IMU below this rate cannot resolve steps (up to 3.5 Hz running, Nyquist: 7 Hz); a file in milliseconds shows as 0.1 Hz
+MIN_IMU_RATE_HZ = 7.0
+# [subject] values a person has (adults and children; CDC growth charts, Winter 2009 Table 4.1 for the segment
+# ratios to height): beyond these the unit is wrong (a height in cm, a mass in g).
+SUBJECT_RANGES = {
+    "height_m": (0.5, 2.5), "mass_kg": (2.0, 350.0), "leg_length_m": (0.2, 1.4), "sensor_height_m": (0.0, 2.5),
+    "thigh_length_m": (0.1, 0.7), "shank_length_m": (0.1, 0.7), "foot_length_m": (0.05, 0.4),
+}
+REFERENCE_TEXT_COLUMNS = ("foot",)  # every other column of a reference table holds numbers
 
 
 @dataclasses.dataclass
@@ -189,6 +198,11 @@ def validate_imu(df: pd.DataFrame, what: str = "imu.csv") -> pd.DataFrame:
     _check_nan(df, [c for c in df.columns if c != "t_s"], what)
 
     dt = np.diff(t)
+    rate = 1.0 / float(np.median(dt))
+    if rate < MIN_IMU_RATE_HZ:
+        hint = " (time stamps in milliseconds? divide t_s by 1000)" if 0.01 <= rate < 1.0 else ""
+        raise InputError(f"{what}: expected t_s in seconds at a rate of at least {MIN_IMU_RATE_HZ:g} Hz, found a median "
+                         f"sample interval of {1.0 / rate:.6g} s ({rate:.3g} Hz){hint}")
     q25, q75 = np.percentile(dt, [25, 75])
     if q75 / q25 > MAX_DT_SPREAD:
         raise InputError(
@@ -258,7 +272,7 @@ def check_subject(subject: dict[str, Any], what: str = "meta.toml [subject]") ->
     centimetres, a leg longer than the body, a sensor above the head."""
     height = subject.get("height_m")
     if height is not None and not SUBJECT_HEIGHT_RANGE_M[0] <= height <= SUBJECT_HEIGHT_RANGE_M[1]:
-        hint = f" (a height in centimetres? write {height / 100:g})" if 90 <= height <= 250 else ""
+        hint = f" (in cm? a height in centimetres: write {height / 100:g})" if 90 <= height <= 250 else ""
         raise InputError(f"{what}: expected height_m in metres ({SUBJECT_HEIGHT_RANGE_M[0]:g}-{SUBJECT_HEIGHT_RANGE_M[1]:g}), "
                          f"found {height:g}{hint}")
     for key in SUBJECT_PART_KEYS:
@@ -281,15 +295,26 @@ def _validate_meta(meta: dict[str, Any], what: str) -> None:
     rec = meta.get("recording")
     if not isinstance(rec, dict) or "id" not in rec:
         raise InputError(f"{what}: expected a [recording] table with id, found {sorted(meta) or 'nothing'}")
+    start = rec.get("start_unix_s")
+    if start is not None and (isinstance(start, bool) or not isinstance(start, (int, float)) or not np.isfinite(start)):
+        raise InputError(f"{what}: expected [recording] start_unix_s a number (Unix time of t_s = 0, s), found {start!r}")
     placement = rec.get("placement", "unknown")
     if placement not in PLACEMENTS:
         raise InputError(f"{what}: expected placement one of {', '.join(PLACEMENTS)}, found {placement!r}")
-    for key, value in meta.get("subject", {}).items():
+    subject = meta.get("subject", {})
+    for key, value in subject.items():
         if key not in SUBJECT_KEYS:
             raise InputError(f"{what}: expected [subject] keys among {', '.join(SUBJECT_KEYS)}, found {key!r}")
-        if not isinstance(value, (int, float)) or not 0 < value < 500:
-            raise InputError(f"{what}: expected a positive number for subject.{key}, found {value!r}")
-    check_subject(meta.get("subject", {}), f"{what} [subject]")
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise InputError(f"{what}: expected a number for subject.{key}, found {value!r}")
+    check_subject(subject, f"{what} [subject]")  # lengths of one person: cm, a leg longer than the body, ...
+    for key, value in subject.items():
+        lo, hi = SUBJECT_RANGES[key]
+        if not lo <= value <= hi:
+            unit = key.rsplit("_", 1)[1]
+            hint = (" (in cm? divide by 100)" if unit == "m" and 100 * lo <= value <= 100 * hi
+                    else " (in g? divide by 1000)" if unit == "kg" and value > hi else "")
+            raise InputError(f"{what}: expected subject.{key} between {lo:g} and {hi:g} {unit}, found {value!r}{hint}")
     geo = meta.get("geo")
     if geo is not None:
         try:
@@ -305,15 +330,17 @@ def _validate_meta(meta: dict[str, Any], what: str) -> None:
 # ----------------------------------------------------------------------------------------------------------------
 
 
-def read_csv(path: Path, what: str | None = None) -> pd.DataFrame:
-    """A header-row CSV; empty or unreadable files become InputErrors."""
+def read_csv(path: Path, what: str | None = None, *, empty_is_missing: bool = False) -> pd.DataFrame:
+    """A header-row CSV; empty or unreadable files become InputErrors. With ``empty_is_missing`` only an empty cell
+    is a missing value: text such as ``N/A`` or ``null`` stays text (and a number check then names it)."""
     what = what or str(path)
     if not path.is_file():
         raise InputError(f"{what}: expected a file, found nothing there")
     if path.stat().st_size == 0:
         raise InputError(f"{what}: expected a header row and data, found an empty file")
     try:
-        df = pd.read_csv(path, skipinitialspace=True)
+        df = (pd.read_csv(path, skipinitialspace=True, keep_default_na=False, na_values=[""]) if empty_is_missing
+              else pd.read_csv(path, skipinitialspace=True))
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError, ValueError) as exc:
         raise InputError(f"{what}: expected a CSV table, found unreadable content ({str(exc).splitlines()[0][:120]})") from None
     df.columns = [str(c).strip() for c in df.columns]
@@ -341,13 +368,16 @@ def _load_reference(ref_dir: Path) -> dict[str, Any]:
     for name, required in REFERENCE_TABLES.items():
         path = ref_dir / f"{name}.csv"
         if path.is_file():
-            df = read_csv(path, f"reference/{name}.csv")
+            what = f"{ref_dir}/{name}.csv"
+            df = read_csv(path, what, empty_is_missing=True)
             missing = [c for c in required if c not in df.columns]
             if missing:
-                raise InputError(f"reference/{name}.csv: expected columns {', '.join(required)}, found {', '.join(df.columns)}")
+                raise InputError(f"{what}: expected columns {', '.join(required)}, found {', '.join(df.columns)}")
+            numeric = [c for c in df.columns if c not in REFERENCE_TEXT_COLUMNS]
+            df[numeric] = numeric_frame(df[numeric], what)
             reference[name] = df
     if (ref_dir / "summary.toml").is_file():
-        reference["summary"] = _reference_summary(read_toml(ref_dir / "summary.toml", what="reference/summary.toml"))
+        reference["summary"] = _reference_summary(read_toml(ref_dir / "summary.toml", what=f"{ref_dir}/summary.toml"))
     return reference
 
 
@@ -365,7 +395,8 @@ def load_recording(path: str | Path, *, with_reference: bool = True) -> Recordin
         if placement not in PLACEMENTS:
             raise InputError(f"{p}: expected imu_<placement>.csv with a placement of CONTRACT.md, found {placement!r}")
         extra[placement] = validate_imu(read_csv(p), str(p))
-    gnss = validate_gnss(read_csv(path / "gnss.csv"), f"{path}/gnss.csv") if (path / "gnss.csv").exists() else None
+    gnss = (validate_gnss(read_csv(path / "gnss.csv", empty_is_missing=True), f"{path}/gnss.csv")
+            if (path / "gnss.csv").exists() else None)
     if gnss is not None and "lat_deg" in gnss.columns and "geo" not in meta:
         raise InputError(f"{path}/meta.toml: expected a [geo] origin because gnss.csv has lat_deg/lon_deg, found none")
     camera = video = frames = None

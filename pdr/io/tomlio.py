@@ -18,13 +18,15 @@ else:  # pragma: no cover
 
 
 def read_toml(path: str | Path, *, what: str = "TOML file") -> dict[str, Any]:
+    """The TOML document at ``path``; errors start with ``what`` and the path (the path once when ``what`` is it)."""
     path = Path(path)
+    label = what if what.endswith(str(path)) or what == path.as_posix() else f"{what} {path}"
     if not path.is_file():
-        raise InputError(f"{what} {path}: expected a file, found nothing there")
+        raise InputError(f"{label}: expected a file, found nothing there")
     try:
         return tomllib.loads(path.read_text(encoding="utf-8"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise InputError(f"{what} {path}: expected valid TOML, found {exc}") from None
+        raise InputError(f"{label}: expected valid TOML, found {exc}") from None
 
 
 def read_json(path: str | Path, *, what: str, missing: str) -> Any:

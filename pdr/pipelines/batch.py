@@ -13,6 +13,8 @@ processes with one thread each for the numeric libraries, so the outputs are ide
   from its ``run.json``); anything else is run again.
 - A scheduler address that does not answer (nothing listening, a silent or foreign service) is an InputError
   within :data:`SCHEDULER_TIMEOUT_S` seconds, before any work is sent.
+- ``summary.csv`` is written (atomically) before the first run and again as each recording finishes, so an
+  interrupted batch still says what finished; recordings not finished have status ``pending``.
 - Progress: a one-line counter on stderr when stderr is a terminal; silent otherwise.
 """
 
@@ -389,14 +391,18 @@ def run_batch(recs: list[Path], out: Path, *, engine: str = "local", workers: in
         results = _run_local(jobs, run_kwargs, workers, progress)
     else:
         results = _run_dask(jobs, run_kwargs, workers, scheduler, progress)
-    for row in results:
-        rows[row["recording_path"]] = row
 
-    table = pd.DataFrame(
-        [{"recording_id": rid, **rows[str(rec)], "output_folder": folder}
-         for folder, (rid, rec) in sorted(ids.items())], columns=SUMMARY_COLUMNS
-    )
-    write_csv(out / "summary.csv", table)
+    def summary_table() -> pd.DataFrame:  # recordings not finished yet have status "pending"
+        return pd.DataFrame([{"recording_id": rid, **rows.get(str(rec), {"recording_path": str(rec), "status": "pending",
+                                                                         "error": ""}), "output_folder": folder}
+                             for folder, (rid, rec) in sorted(ids.items())], columns=SUMMARY_COLUMNS)
+
+    write_csv(out / "summary.csv", summary_table())
+    for row in results:  # summary.csv rewritten (atomically) as each row completes: an interrupted batch says what finished
+        rows[row["recording_path"]] = row
+        write_csv(out / "summary.csv", summary_table())
+
+    table = summary_table()
     counts = table["status"].value_counts()
     line = (f"{len(table)} recordings: {counts.get('ok', 0)} ok, {counts.get('skipped', 0)} skipped (complete), "
             f"{counts.get('failed', 0)} failed -> {out / 'summary.csv'}")

@@ -4,11 +4,13 @@ Stages (each timed in ``summary.json``): load (never ``reference/``) -> steps (`
 (``--model`` or ``[step_length]``) -> strides (foot IMUs ``[foot]``, leg camera ``[flow]``/``[slip]``) -> GNSS in the local
 frame (``--no-gnss``, ``[gnss] mask_intervals_s``) -> fusion (``[fusion] method = "graph" | "incremental" | "ekf"`` plus
 that class's parameters; default the batch factor graph) -> outputs, written in a temporary folder renamed onto OUT at
-the end (no half-written output, ever).
+the end (no half-written output, ever). An existing OUT needs ``--force``; then only the files ``pdr run`` writes are
+replaced in it.
 """
 
 from __future__ import annotations
 
+import copy
 import hashlib
 import time
 import warnings
@@ -24,9 +26,10 @@ from pdr.errors import InputError, check_keys
 from pdr.fusion import EkfFusion, FactorGraphFusion, IncrementalFusion
 from pdr.geo import latlon_to_en
 from pdr.heading import AttitudeStepHeading
-from pdr.io.atomic import atomic_dir
-from pdr.io.recording import Recording, load_recording
+from pdr.io.atomic import atomic_outputs
+from pdr.io.recording import Recording
 from pdr.pipelines.bouts import recording_bouts
+from pdr.pipelines.check import check_recording
 from pdr.pipelines.faults import rejected_gnss, sensor_faults, warning_line, warning_objects, widen_steps
 from pdr.pipelines.foot import foot_chain, foot_strides
 from pdr.pipelines.gait_forms import per_form_step_lengths
@@ -52,6 +55,8 @@ STEP_SOURCE = "accelerometer"
 GNSS_KEYS = ("mask_intervals_s",)
 FUSION_METHODS = {"graph": FactorGraphFusion, "incremental": IncrementalFusion, "ekf": EkfFusion}
 HASH_CHUNK_BYTES = 1 << 20
+RUN_OUTPUT_FILES = ("steps.csv", "strides.csv", "trajectory.csv", "trajectory.geojson", "trajectory.tum", "trajectory.gpx",
+                    "trajectory.png", "run.json", "summary.json")  # --force replaces these in OUT, nothing else
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -151,15 +156,17 @@ def input_hashes(rec_dir: Path) -> dict[str, str]:
 
 
 def _check_output(out: Path, force: bool) -> None:
-    """OUT may be new, empty, a previous ``pdr run`` output (it has ``run.json``), or anything with ``--force``."""
-    if not out.exists() or force:
+    """OUT may be new or empty; an existing one (an earlier run, the user's folder) needs ``--force``, and then only
+    the files ``pdr run`` writes (``RUN_OUTPUT_FILES``) are replaced: the user's own files in it stay."""
+    if not out.exists():
         return
     if not out.is_dir():
-        raise InputError(f"{out}: expected an output folder, found a file (use --force to replace it)")
-    if (out / "run.json").is_file() or not any(out.iterdir()):
+        raise InputError(f"{out}: expected an output folder, found a file")
+    if force or not any(out.iterdir()):
         return
-    raise InputError(f"{out}: expected a new output folder or a previous pdr run output (with run.json), "
-                     f"found a folder with other content (use --force to replace it)")
+    kind = "an earlier pdr run output" if (out / "run.json").is_file() else "a folder with other files"
+    raise InputError(f"{out}: expected a new or empty output folder, found {kind} (use --force to replace the files "
+                     f"pdr run writes; other files in it are kept)")
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -186,11 +193,12 @@ def run_recording(rec: Path, out: Path, *, config_path=None, model_path=None, us
 
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        recording = load_recording(rec, with_reference=False)
+        recording = check_recording(rec, with_reference=False)
         config = load_config(config_path)
         settings = gnss_settings(config)
         method, fusion = make_fusion(config.get("fusion"))
         model, model_choice = choose_model(config, recording.subject, recording.placement, model_path)
+        model_given = {"model": type(model).__name__, "params": copy.deepcopy(model.get_params())}  # run.json: the input
         lap("load_s")
 
         steps = detect_steps(recording, config).reset_index(drop=True)
@@ -236,6 +244,7 @@ def run_recording(rec: Path, out: Path, *, config_path=None, model_path=None, us
             model = fusion.step_model_ if fusion.step_model_ is not None else model
         elif len(steps):
             steps["step_length_m"] = clipped_lengths(np.asarray(fusion.step_length_m_, float), recording.id)
+            steps["heading_rad"] = traj["heading_rad"].to_numpy(float)[1:]  # the fused east-north heading of each step
             model = fusion.step_model_ if fusion.step_model_ is not None else model
         else:
             usable = None if gnss is None else (np.isfinite(gnss["e_m"]) & np.isfinite(gnss["n_m"]) & ~gnss["masked"]
@@ -268,7 +277,8 @@ def run_recording(rec: Path, out: Path, *, config_path=None, model_path=None, us
     if gnss is not None:
         valid = np.isfinite(gnss["e_m"].to_numpy()) & np.isfinite(gnss["n_m"].to_numpy())
         gnss_counts = {"fixes": len(gnss), "valid": int(valid.sum()), "masked": int((gnss["masked"] & valid).sum()),
-                       "jumped": int((gnss_suspect & valid).sum()), "used": int(gnss_used.sum())}
+                       "jumped": int((gnss_suspect & ~faults.gnss_inaccurate_ & valid).sum()),
+                       "inaccurate": int((faults.gnss_inaccurate_ & valid).sum()), "used": int(gnss_used.sum())}
     step_model = {"model": type(model).__name__, "params": model.get_params(), "choice": model_choice}
     summary: dict[str, Any] = {
         "recording_id": recording.id,
@@ -279,7 +289,7 @@ def run_recording(rec: Path, out: Path, *, config_path=None, model_path=None, us
         "walking_duration_s": float(steps["t_s"].iloc[-1] - steps["t_s"].iloc[0]) if len(steps) > 1 else 0.0,
         "step_model": step_model,
         "solver": solver,
-        "gnss": gnss_counts or {"fixes": 0, "valid": 0, "masked": 0, "jumped": 0, "used": 0},
+        "gnss": gnss_counts or {"fixes": 0, "valid": 0, "masked": 0, "jumped": 0, "inaccurate": 0, "used": 0},
         "warnings": warning_list,
         "not_walking": not_walking,
     }
@@ -302,11 +312,11 @@ def run_recording(rec: Path, out: Path, *, config_path=None, model_path=None, us
         "options": {"use_gnss": use_gnss, "plot": plot},
         "config": {"input": config, "steps": make_detector(config.get("steps"), recording.placement).get_params(),
                    "heading": AttitudeStepHeading.from_config(config.get("heading")).get_params(),
-                   "gnss": settings, "step_length": step_model, "faults": faults.get_params(),
+                   "gnss": settings, "step_length": model_given, "faults": faults.get_params(),
                    "fusion": {"method": method, "params": fusion.get_params()}},
     }
 
-    with atomic_dir(out, force=True) as tmp:
+    with atomic_outputs(out, RUN_OUTPUT_FILES) as tmp:
         write_steps_csv(tmp / "steps.csv", steps)
         if strides is not None:
             write_strides_csv(tmp / "strides.csv", strides)
@@ -315,7 +325,8 @@ def run_recording(rec: Path, out: Path, *, config_path=None, model_path=None, us
         write_geojson(tmp / "trajectory.geojson", traj, origin, name=recording.id)
         write_tum(tmp / "trajectory.tum", traj)
         if origin is not None:
-            write_gpx(tmp / "trajectory.gpx", traj, origin, name=recording.id)
+            write_gpx(tmp / "trajectory.gpx", traj, origin, name=recording.id,
+                      start_unix_s=recording.meta["recording"].get("start_unix_s"))
         if plot:
             plot_gnss = None
             if gnss is not None:

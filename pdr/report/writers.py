@@ -17,6 +17,7 @@ from __future__ import annotations
 import json
 import math
 import xml.etree.ElementTree as ET
+from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
@@ -179,19 +180,25 @@ def write_geojson(path: Path, traj: pd.DataFrame, origin: tuple[float, float] | 
     write_text(path, json.dumps(geojson_object(traj, origin, name=name), sort_keys=True, allow_nan=False) + "\n")
 
 
-def gpx_text(traj: pd.DataFrame, origin: tuple[float, float], *, name: str = "") -> str:
-    """A GPX 1.1 document with one track of the path (``trkpt lat lon``; the recording has no absolute clock, so no ``time``)."""
+def gpx_text(traj: pd.DataFrame, origin: tuple[float, float], *, name: str = "", start_unix_s: float | None = None) -> str:
+    """A GPX 1.1 document with one track of the path (``trkpt lat lon``), each point with its UTC ``time`` (ISO 8601,
+    microseconds) when the recording's clock is known (``start_unix_s``: the Unix time of ``t_s = 0``, ``meta.toml``
+    ``[recording]``); without it the recording has no absolute clock, so no ``time``."""
     table = trajectory_table(traj, origin)
     ET.register_namespace("", GPX_NS)
     root = ET.Element(f"{{{GPX_NS}}}gpx", {"version": "1.1", "creator": f"pdr {__version__}"})
     trk = ET.SubElement(root, f"{{{GPX_NS}}}trk")
     ET.SubElement(trk, f"{{{GPX_NS}}}name").text = name
     seg = ET.SubElement(trk, f"{{{GPX_NS}}}trkseg")
-    for lat, lon in zip(table["lat_deg"], table["lon_deg"]):
-        ET.SubElement(seg, f"{{{GPX_NS}}}trkpt", {"lat": f"{lat:.9f}", "lon": f"{lon:.9f}"})
+    for lat, lon, t in zip(table["lat_deg"], table["lon_deg"], table["t_s"]):
+        point = ET.SubElement(seg, f"{{{GPX_NS}}}trkpt", {"lat": f"{lat:.9f}", "lon": f"{lon:.9f}"})
+        if start_unix_s is not None:
+            utc = datetime.fromtimestamp(round(float(start_unix_s) + float(t), 6), tz=timezone.utc)
+            ET.SubElement(point, f"{{{GPX_NS}}}time").text = utc.isoformat(timespec="microseconds").replace("+00:00", "Z")
     ET.indent(root)
     return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
 
 
-def write_gpx(path: Path, traj: pd.DataFrame, origin: tuple[float, float], *, name: str = "") -> None:
-    write_text(path, gpx_text(traj, origin, name=name))
+def write_gpx(path: Path, traj: pd.DataFrame, origin: tuple[float, float], *, name: str = "",
+              start_unix_s: float | None = None) -> None:
+    write_text(path, gpx_text(traj, origin, name=name, start_unix_s=start_unix_s))

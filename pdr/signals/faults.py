@@ -1,5 +1,6 @@
 """Sensor faults inside a valid recording, detected from the data: gaps, stuck or saturated sensors, duplicated
-samples, a sampling rate that changes, a disturbed magnetic field, GNSS fixes that jump.
+samples, a sampling rate that changes, a disturbed magnetic field, GNSS fixes that jump or that report an accuracy
+too poor to use.
 
 A recording with these faults is still valid (CONTRACT.md: ``t_s`` strictly increasing, finite values); ``pdr run``
 keeps going, widens the uncertainty where they are and lists them in ``summary.json`` ``warnings``. What stays an
@@ -33,7 +34,7 @@ from pdr.signals.resample import moving_average, runs
 
 FAULT_COLUMNS = ["kind", "sensor", "t_start_s", "t_end_s", "message"]
 IMU_FAULT_KINDS = ("gap", "stuck", "saturation", "duplicated_samples", "rate_change", "mag_disturbance")
-GNSS_FAULT_KINDS = ("gnss_jump",)
+GNSS_FAULT_KINDS = ("gnss_jump", "gnss_inaccurate")
 TRIADS = {"acc": ACC_COLUMNS, "gyr": GYR_COLUMNS, "mag": MAG_COLUMNS}
 # The smallest full-scale ranges of MEMS IMUs (datasheets: +-2 g accelerometers, +-125 deg/s gyroscopes): a signal
 # flat at its extreme below these is not clipped by a sensor range.
@@ -121,12 +122,17 @@ class SensorFaultDetection(Algorithm):
         combined reported accuracy. The fixes split into runs of consistent fixes; the longest run is trusted, and a
         run is trusted when it is consistent with the nearest trusted fix before (or after) it. Fixes of the other
         runs jumped: they are reported and not used.
+    max_h_acc_m : a fix reporting ``h_acc_m`` above this (1 sigma, m) is unusable: reported and not used, and left
+        out of the jump test. 50 m is ten times the 1-sigma accuracy of a phone outdoors under open sky (about 5 m,
+        van Diggelen & Enge, ION GNSS+ 2015) and more than a step model off by 5% drifts over a kilometre; it also
+        catches the sentinel accuracies (999, 9999) that receivers write for a fix they do not have.
     join_s : flagged samples closer than this are one interval.
 
     Attributes
     ----------
     faults_ : table ``kind, sensor, t_start_s, t_end_s, message``, sorted by start.
-    gnss_suspect_ : bool per GNSS row (True: a fix that jumped).
+    gnss_suspect_ : bool per GNSS row (True: a fix not to use: it jumped or its reported accuracy is too poor).
+    gnss_inaccurate_ : bool per GNSS row (True: ``h_acc_m`` above ``max_h_acc_m``).
 
     Notes
     -----
@@ -142,7 +148,7 @@ class SensorFaultDetection(Algorithm):
                  mag_norm_tolerance: float = 0.15, mag_dip_tolerance_rad: float = float(np.radians(20.0)), mag_window_s: float = 0.5, min_mag_disturbance_s: float = 0.25,
                  gravity_window_s: float = 2.0, mag_rotation_factor: float = 3.0,
                  max_speed_mps: float = 6.0, gnss_sigma_factor: float = 3.0, default_h_acc_m: float = 5.0,
-                 join_s: float = 0.5):
+                 max_h_acc_m: float = 50.0, join_s: float = 0.5):
         self.gap_factor = gap_factor
         self.min_gap_s = min_gap_s
         self.stuck_min_s = stuck_min_s
@@ -161,6 +167,7 @@ class SensorFaultDetection(Algorithm):
         self.max_speed_mps = max_speed_mps
         self.gnss_sigma_factor = gnss_sigma_factor
         self.default_h_acc_m = default_h_acc_m
+        self.max_h_acc_m = max_h_acc_m
         self.join_s = join_s
 
     # ------------------------------------------------------------------------------------------------------------
@@ -186,11 +193,12 @@ class SensorFaultDetection(Algorithm):
                 if sensor == "mag":
                     gyr = imu[list(GYR_COLUMNS)].to_numpy(float) if all(c in imu.columns for c in GYR_COLUMNS) else None
                     rows += self._mag_disturbance(t, x, imu[list(ACC_COLUMNS)].to_numpy(float), gyr, med_dt)
-        self.gnss_suspect_ = np.zeros(0, bool)
+        self.gnss_suspect_ = self.gnss_inaccurate_ = np.zeros(0, bool)
         if gnss is not None:
-            suspect, gnss_rows = self._gnss_jumps(gnss)
-            self.gnss_suspect_ = suspect
-            rows += gnss_rows
+            inaccurate, inaccurate_rows = self._gnss_inaccurate(gnss)
+            suspect, gnss_rows = self._gnss_jumps(gnss, inaccurate)
+            self.gnss_suspect_, self.gnss_inaccurate_ = suspect | inaccurate, inaccurate
+            rows += inaccurate_rows + gnss_rows
         faults = pd.DataFrame(rows, columns=FAULT_COLUMNS) if rows else empty_faults()
         self.faults_ = faults.sort_values(["t_start_s", "kind"], kind="stable").reset_index(drop=True)
         return self
@@ -310,7 +318,26 @@ class SensorFaultDetection(Algorithm):
                                    f"{worst_dip:.0f} deg (steel or electronics nearby); magnetic heading not used"})
         return out
 
-    def _gnss_jumps(self, gnss: pd.DataFrame) -> tuple[np.ndarray, list[dict]]:
+    def _gnss_inaccurate(self, gnss: pd.DataFrame) -> tuple[np.ndarray, list[dict]]:
+        """Valid fixes whose reported ``h_acc_m`` is above ``max_h_acc_m``, and one fault row per run of them."""
+        if "h_acc_m" not in gnss.columns or "t_s" not in gnss.columns:
+            return np.zeros(len(gnss), bool), []
+        t = gnss["t_s"].to_numpy(float)
+        acc = gnss["h_acc_m"].to_numpy(float)
+        position = np.isfinite(gnss[[c for c in ("e_m", "n_m") if c in gnss.columns]].to_numpy(float)).all(axis=1)
+        inaccurate = position & np.isfinite(t) & (acc > self.max_h_acc_m)
+        idx = np.flatnonzero(position & np.isfinite(t))
+        out = []
+        for a, b in runs(inaccurate[idx]):
+            rows = idx[a:b]
+            out.append({"kind": "gnss_inaccurate", "sensor": "gnss", "t_start_s": float(t[rows[0]]),
+                        "t_end_s": float(t[rows[-1]]),
+                        "message": f"{len(rows)} GNSS fix(es) reporting h_acc_m {float(np.min(acc[rows])):.1f} m or worse "
+                                   f"(limit max_h_acc_m = {self.max_h_acc_m:g} m); not used"})
+        return inaccurate, out
+
+    def _gnss_jumps(self, gnss: pd.DataFrame, skip: np.ndarray) -> tuple[np.ndarray, list[dict]]:
+        """Fixes that jumped (see the class docstring); rows where ``skip`` is True take no part."""
         for c in ("t_s", "e_m", "n_m"):
             if c not in gnss.columns:
                 raise InputError(f"gnss: expected columns t_s, e_m, n_m, found {', '.join(map(str, gnss.columns))}")
@@ -319,7 +346,7 @@ class SensorFaultDetection(Algorithm):
         acc = gnss["h_acc_m"].to_numpy(float) if "h_acc_m" in gnss.columns else np.full(len(t), np.nan)
         acc = np.where(np.isfinite(acc) & (acc > 0), acc, self.default_h_acc_m)
         suspect = np.zeros(len(t), bool)
-        idx = np.flatnonzero(np.isfinite(en).all(axis=1) & np.isfinite(t))
+        idx = np.flatnonzero(np.isfinite(en).all(axis=1) & np.isfinite(t) & ~skip)
         if len(idx) < 2:
             return suspect, []
 

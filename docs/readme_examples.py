@@ -1,0 +1,126 @@
+"""Run the README's command examples and check (``--update``: rewrite) the output they show.
+
+An example is a fenced block right after a line ``<!-- example -->``, or ``<!-- example: slow -->`` for one that takes
+minutes (run with ``--all``; ``make test`` checks the others, ``tests/test_readme_examples.py``). Each ``$ `` line of
+the block is a command, run by bash in one scratch folder shared by all examples in README order, with this
+checkout's ``pdr`` first and ``configs/`` linked in; the lines after it, up to the next ``$ ``, are what it prints (stdout and stderr together).
+Speeds (``frames/s``) and the scratch folder's path are masked before comparing.
+
+    python docs/readme_examples.py            # check the fast examples; exit 1 and a diff when one drifted
+    python docs/readme_examples.py --all      # the slow ones too
+    python docs/readme_examples.py --update   # write what the commands print now into README.md
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import difflib
+import os
+import re
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+README = ROOT / "README.md"
+MARKER = re.compile(r"^<!-- example(: slow)? -->$")
+MASKS = [(re.compile(r"\d+(\.\d+)? frames/s"), "<N> frames/s")]  # speeds vary with the machine's load
+
+
+@dataclasses.dataclass
+class Example:
+    """A fenced block: its lines ``first..last`` (the fences excluded) in README.md and its commands with the output
+    each shows."""
+
+    first: int
+    last: int
+    slow: bool
+    commands: list[tuple[str, list[str]]]
+
+
+def parse(lines: list[str]) -> list[Example]:
+    examples = []
+    for i, line in enumerate(lines):
+        match = MARKER.match(line.strip())
+        if not match:
+            continue
+        if i + 1 >= len(lines) or not lines[i + 1].startswith("```"):
+            raise SystemExit(f"README.md line {i + 1}: expected a fenced block after the example marker")
+        end = next(j for j in range(i + 2, len(lines)) if lines[j].startswith("```"))
+        commands: list[tuple[str, list[str]]] = []
+        for text in lines[i + 2:end]:
+            if text.startswith("$ "):
+                commands.append((text[2:], []))
+            elif commands:
+                commands[-1][1].append(text)
+            else:
+                raise SystemExit(f"README.md line {i + 3}: expected the block to start with a `$ ` command")
+        examples.append(Example(first=i + 2, last=end - 1, slow=bool(match.group(1)), commands=commands))
+    return examples
+
+
+def masked(lines: list[str], scratch: Path) -> list[str]:
+    out = []
+    for line in lines:
+        line = line.replace(f"{scratch}/", "").replace(str(scratch), ".")
+        for pattern, replacement in MASKS:
+            line = pattern.sub(replacement, line)
+        out.append(line.rstrip())
+    return out
+
+
+def run_command(command: str, scratch: Path) -> list[str]:
+    """What ``command`` prints (stdout and stderr, in order), run by bash in ``scratch`` with this checkout's pdr."""
+    env = dict(os.environ, PYTHONPATH=str(ROOT), PATH=f"{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}",
+               PYTHONUNBUFFERED="1")
+    done = subprocess.run(["bash", "-c", command.split("  # ")[0]], cwd=scratch, env=env, text=True,
+                          stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    return done.stdout.splitlines()
+
+
+def check(readme: Path = README, *, run_slow: bool = False, update: bool = False, scratch: Path | None = None) -> list[str]:
+    """Run the examples; return one unified diff per command whose shown output differs (empty: all match). With
+    ``update`` the README gets the new output instead."""
+    lines = readme.read_text(encoding="utf-8").splitlines()
+    diffs: list[str] = []
+    replacements: list[tuple[int, int, list[str]]] = []
+    with tempfile.TemporaryDirectory(prefix="pdr_readme_") as tmp:
+        scratch = Path(scratch or tmp).resolve()
+        (scratch / "configs").symlink_to(ROOT / "configs")  # the examples name configs/ as from the repository root
+        for example in parse(lines):
+            if example.slow and not run_slow:
+                continue
+            block = []
+            for command, shown in example.commands:
+                actual = masked(run_command(command, scratch), scratch)
+                block += [f"$ {command}", *actual]
+                if masked(shown, scratch) != actual:
+                    diffs.append("\n".join(difflib.unified_diff(shown, actual, f"README.md: $ {command}", "printed now",
+                                                                lineterm="")))
+            replacements.append((example.first, example.last, block))
+    if update and diffs:
+        for first, last, block in sorted(replacements, reverse=True):
+            lines[first:last + 1] = block
+        readme.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return diffs
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--all", action="store_true", help="also run the slow examples")
+    parser.add_argument("--update", action="store_true", help="write the output printed now into README.md")
+    args = parser.parse_args(argv)
+    diffs = check(run_slow=args.all, update=args.update)
+    for diff in diffs:
+        print(diff)
+    if diffs and not args.update:
+        print(f"{len(diffs)} README example(s) no longer print what README.md shows; "
+              "run python docs/readme_examples.py --update (and --all for the slow ones)", file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
