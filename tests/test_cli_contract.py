@@ -110,11 +110,15 @@ def test_fixes_reporting_a_poor_accuracy_are_unusable(walk, tmp_path, capsys):
 def test_run_json_records_the_model_given_not_the_fitted_one(walk, tmp_path, capsys):
     model = tmp_path / "model.json"
     save_model(RegressionStepLength.population(a_m=0.114), model)
-    assert _cli(["run", walk, "-o", tmp_path / "out", "--model", model], capsys)[0] == 0
+    code, _, err = _cli(["run", walk, "-o", tmp_path / "out", "--model", model], capsys)
+    assert code == 0
     run = json.loads((tmp_path / "out" / "run.json").read_text())
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert run["config"]["step_length"]["params"]["a_m"] == pytest.approx(0.114)
-    assert summary["step_model"]["params"]["a_m"] != pytest.approx(0.114)  # calibrated in the graph from GNSS
+    if summary["solver"]["converged"]:  # calibrated in the graph from GNSS
+        assert summary["step_model"]["params"]["a_m"] != pytest.approx(0.114)
+    else:  # the alternation did not settle: said so, and the model given is the one used
+        assert "the step model given is kept" in err and summary["step_model"]["params"]["a_m"] == pytest.approx(0.114)
 
 
 def test_evaluate_step_count_errors_are_both_signed(walk, tmp_path, capsys):

@@ -51,15 +51,16 @@ GYR_MAX_PLAUSIBLE_RADPS = 40.0  # 2,300 deg/s: beyond any human segment; larger 
 MAG_UT_MEDIAN_RANGE = (5.0, 500.0)  # the Earth's field is 25-65 µT; indoors 5-500
 BARO_HPA_RANGE = (250.0, 1100.0)
 MAX_DT_SPREAD = 4.0  # interquartile ratio of sample intervals above which the rate "varies wildly"
-# An IMU below this rate cannot resolve steps (up to 3.5 Hz running, Nyquist: 7 Hz); a file in milliseconds shows as 0.1 Hz
-MIN_IMU_RATE_HZ = 7.0
+# Below this rate t_s is not in seconds: milliseconds read as seconds give 0.1 Hz for a 100 Hz IMU. A real 5 Hz phone
+# export passes (no steps can be found below 7 Hz, twice the highest cadence: pdr run then follows the GNSS alone).
+MIN_IMU_RATE_HZ = 1.0
 # [subject] values a person has (adults and children; CDC growth charts, Winter 2009 Table 4.1 for the segment
 # ratios to height): beyond these the unit is wrong (a height in cm, a mass in g).
 SUBJECT_RANGES = {
     "height_m": (0.5, 2.5), "mass_kg": (2.0, 350.0), "leg_length_m": (0.2, 1.4), "sensor_height_m": (0.0, 2.5),
     "thigh_length_m": (0.1, 0.7), "shank_length_m": (0.1, 0.7), "foot_length_m": (0.05, 0.4),
 }
-REFERENCE_TEXT_COLUMNS = ("foot",)  # every other column of a reference table holds numbers
+REFERENCE_TEXT_COLUMNS = ("foot", "mechanics_source")  # every other column of a reference table holds numbers
 
 
 @dataclasses.dataclass

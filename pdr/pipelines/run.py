@@ -56,7 +56,7 @@ GNSS_KEYS = ("mask_intervals_s",)
 FUSION_METHODS = {"graph": FactorGraphFusion, "incremental": IncrementalFusion, "ekf": EkfFusion}
 HASH_CHUNK_BYTES = 1 << 20
 RUN_OUTPUT_FILES = ("steps.csv", "strides.csv", "trajectory.csv", "trajectory.geojson", "trajectory.tum", "trajectory.gpx",
-                    "trajectory.png", "run.json", "summary.json")  # --force replaces these in OUT, nothing else
+                    "trajectory.png", "bouts.csv", "bouts.png", "run.json", "summary.json")  # --force replaces these in OUT, nothing else
 
 
 # ----------------------------------------------------------------------------------------------------------------
