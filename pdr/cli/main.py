@@ -73,17 +73,6 @@ def _cmd_run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _positive_metres(text: str) -> float:
-    """``--distance-m``: a number of metres > 0 (anything else is a usage error)."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a distance in metres, found {text!r}") from None
-    if not (value > 0 and value < float("inf")):
-        raise argparse.ArgumentTypeError(f"expected a distance > 0 m, found {text}")
-    return value
-
-
 def _cmd_calibrate(args: argparse.Namespace) -> int:
     from pdr.pipelines.calibrate import calibrate_recordings
 
@@ -256,7 +245,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("recs", nargs="+", help="recording folders (with gnss.csv unless a known distance is given)")
     p.add_argument("-o", "--output", required=True, help="the model JSON file to write")
     p.add_argument("--config", default=None, help=config_help)
-    p.add_argument("--distance-m", type=_positive_metres, action="append", metavar="D",
+    p.add_argument("--distance-m", type=_positive_float, action="append", metavar="D",
                    help="the k-th recording's walk was D metres (repeat per recording; others use GNSS)")
     p.add_argument("--landmarks", action="append", metavar="CSV",
                    help="the k-th recording passed these surveyed points (t_s, e_m, n_m) in turn")
