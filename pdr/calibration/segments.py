@@ -132,14 +132,10 @@ def gnss_segments(steps: pd.DataFrame, gnss: pd.DataFrame, *, segment_steps: flo
                 straight = 1.0
             dist = float(np.hypot(eg[ib] - eg[ia], ng[ib] - ng[ia]))
             meas = dist / (n * straight) if n > 0 and straight > 0 else np.nan
-            if n < min_segment_steps:
-                reason = f"fewer than {min_segment_steps:g} steps"
-            elif straight < min_straightness:
+            if n >= min_segment_steps and straight < min_straightness:
                 reason = f"not straight ({straight:.2f} < {min_straightness:g})"
-            elif not (min_step_m <= meas <= max_step_m):
-                reason = f"implausible step {meas:.2f} m"
             else:
-                reason = ""
+                reason = _step_gate(n, meas, min_segment_steps, min_step_m, max_step_m)
             rows.append((tg[ia], tg[ib], n, dist, straight, float(np.sqrt((h_acc[ia] ** 2 + h_acc[ib] ** 2) / 2)),
                          meas, k_first, k_last, reason == "", reason))
             a = b
@@ -147,6 +143,15 @@ def gnss_segments(steps: pd.DataFrame, gnss: pd.DataFrame, *, segment_steps: flo
         return empty
     out = pd.DataFrame(rows, columns=list(SEGMENT_COLUMNS))
     return out.astype({"k_first": int, "k_last": int, "used": bool})
+
+
+def _step_gate(n_steps: float, step_m: float, min_segment_steps: float, min_step_m: float, max_step_m: float) -> str:
+    """Why a segment of ``n_steps`` steps measuring ``step_m`` per step is not used ("" when it is)."""
+    if n_steps < min_segment_steps:
+        return f"fewer than {min_segment_steps:g} steps"
+    if not (min_step_m <= step_m <= max_step_m):
+        return f"implausible step {step_m:.2f} m"
+    return ""
 
 
 def distance_segments(steps: pd.DataFrame, distances: pd.DataFrame, *, min_segment_steps: float, min_step_m: float,
@@ -179,12 +184,7 @@ def distance_segments(steps: pd.DataFrame, distances: pd.DataFrame, *, min_segme
             n = float(count[1] - count[0])
             k_first, k_last = int(np.floor(count[0])) + 1, int(np.floor(count[1]))
         meas = dist / n if n > 0 else np.nan
-        if n < min_segment_steps:
-            reason = f"fewer than {min_segment_steps:g} steps"
-        elif not (min_step_m <= meas <= max_step_m):
-            reason = f"implausible step {meas:.2f} m"
-        else:
-            reason = ""
+        reason = _step_gate(n, meas, min_segment_steps, min_step_m, max_step_m)
         rows.append((t0, t1, n, dist, 1.0, np.nan, meas, k_first, k_last, reason == "", reason, std))
     out = pd.DataFrame(rows, columns=[*SEGMENT_COLUMNS, "distance_std_m"])
     return out.astype({"k_first": int, "k_last": int, "used": bool})
