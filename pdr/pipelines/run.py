@@ -1,8 +1,8 @@
 """``pdr run REC -o OUT``: the full reconstruction of one recording, and every output of CONTRACT.md.
 
-Stages (each timed in ``summary.json``): load (never ``reference/``) -> steps (``[steps]``, ``[heading]``) -> step lengths
-(``--model`` or ``[step_length]``) -> strides (foot IMUs ``[foot]``, leg camera ``[flow]``/``[slip]``) -> GNSS in the local
-frame (``--no-gnss``, ``[gnss] mask_intervals_s``) -> fusion (``[fusion] method = "graph" | "incremental" | "ekf"`` plus
+Stages (each timed in ``summary.json``): load (never ``reference/``) -> GNSS in the local frame (``--no-gnss``, ``[gnss]
+mask_intervals_s``) -> steps (``[steps]``, ``[heading]``; stretches not walked dropped) -> step lengths (``--model`` or
+``[step_length]``) -> strides (foot IMUs ``[foot]``, leg camera ``[flow]``/``[slip]``) -> faults -> fusion (``[fusion] method = "graph" | "incremental" | "ekf"`` plus
 that class's parameters; default the batch factor graph) -> outputs, written in a temporary folder renamed onto OUT at
 the end (no half-written output, ever). An existing OUT needs ``--force``; then only the files ``pdr run`` writes are
 replaced in it.
@@ -201,9 +201,11 @@ def run_recording(rec: Path, out: Path, *, config_path=None, model_path=None, us
         model_given = {"model": type(model).__name__, "params": copy.deepcopy(model.get_params())}  # run.json: the input
         lap("load_s")
 
+        gnss = gnss_local(recording, settings) if use_gnss else None
+        lap("gnss_s")
+
         steps = detect_steps(recording, config).reset_index(drop=True)
-        not_walking = not_walking_intervals(steps, gnss_local(recording, settings) if use_gnss else None,
-                                            recording.subject.get("height_m"))
+        not_walking = not_walking_intervals(steps, gnss, recording.subject.get("height_m"))
         for iv in not_walking:
             warnings.warn(interval_message(recording.id, iv), stacklevel=2)
         steps = drop_not_walking(steps, not_walking)
@@ -224,9 +226,6 @@ def run_recording(rec: Path, out: Path, *, config_path=None, model_path=None, us
         stride_tables = [t for t in (foot_strides(recording, config), camera_strides(recording, config)) if t is not None]
         strides = pd.concat(stride_tables, ignore_index=True).sort_values("t_end_s", kind="stable") if stride_tables else None
         lap("strides_s")
-
-        gnss = gnss_local(recording, settings) if use_gnss else None
-        lap("gnss_s")
 
         faults = sensor_faults(recording.imu, gnss, config.get("faults"))  # [faults]: SensorFaultDetection
         steps = widen_steps(steps, faults.faults_, float(recording.imu["t_s"].iloc[0]))
