@@ -11,12 +11,15 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import logging
 import pkgutil
 import sys
 import time
 from pathlib import Path
 
 import pandas as pd
+
+from pdr.errors import LOGGER_NAME
 
 COLUMNS = ["area", "case", "metric", "ours", "unit", "target", "anchor"]
 
@@ -35,6 +38,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--quick", action="store_true", help="smaller cases, for a smoke run (default: full size)")
     parser.add_argument("-o", "--output", default="out/bench/results.csv", help="CSV of the table (default: %(default)s)")
     args = parser.parse_args(argv)
+    logger = logging.getLogger(LOGGER_NAME)  # the library's warnings are not part of the tables (summary.json keeps them)
+    logger.addHandler(logging.NullHandler())
+    logger.propagate = False
     names = list(dict.fromkeys(args.names + args.area)) or available
     unknown = [n for n in names if n not in available]
     if unknown:

@@ -13,7 +13,6 @@ Run with ``.venv/bin/python -m benchmarks faults`` (``--quick``: two 3-minute wa
 from __future__ import annotations
 
 import tempfile
-import warnings
 from pathlib import Path
 
 import numpy as np
@@ -24,6 +23,7 @@ from pdr.io.recording import save_recording
 from pdr.pipelines.run import run_recording
 from pdr.sim import simulate
 from pdr.sim.faults import inject_faults, random_faults
+from pdr.errors import collect_warnings
 
 DETECTED_AS = {"dropout": "gap", "clock_jump": "gap", "stuck": "stuck", "saturation": "saturation",
                "duplicated": "duplicated_samples", "rate_change": "rate_change", "mag_steel": "mag_disturbance",
@@ -59,8 +59,7 @@ def run(quick: bool = False) -> list[dict]:
     duration = 180.0 if quick else 600.0
     seeds = [1, 2] if quick else [1, 2, 3, 4]
     clean_err, faulty_err, hits, kinds, injected_s = [], [], [], [], 0.0
-    with tempfile.TemporaryDirectory(prefix="pdr-bench-faults-") as tmp, warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+    with tempfile.TemporaryDirectory(prefix="pdr-bench-faults-") as tmp, collect_warnings():
         base = Path(tmp)
         for seed in seeds:
             rec = simulate(scenario(duration), seed)

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import tempfile
 import time
-import warnings
 from pathlib import Path
 
 import numpy as np
@@ -25,6 +24,7 @@ from pdr.eval.evaluate import _match_intervals
 from pdr.pipelines.foot import foot_strides
 from pdr.pipelines.run import run_recording
 from pdr.sim import simulate
+from pdr.errors import collect_warnings
 
 ROOT = Path(__file__).resolve().parents[1]
 RAMPP = "Rampp et al. 2015 (shoe IMU, geriatric patients): 6.26 cm stride-length MAE"
@@ -36,8 +36,7 @@ SIM_ANCHOR = "pdr simulate truth: heel displacement between heel strikes"
 
 
 def _import(fmt: str, src: Path, dest: Path, **kw) -> dict[str, Recording]:
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # the x-io clock repair warning is expected
+    with collect_warnings():
         return {p.name: load_recording(p) for p in import_recordings(fmt, src, dest, **kw)}
 
 
@@ -136,8 +135,7 @@ def leave_one_out(scores: pd.DataFrame) -> dict[str, tuple[str, float]]:
 
 def run_closure(rec_dir: Path, out: Path) -> tuple[float, float]:
     """Final displacement from the start (m) and the path length (m) of ``pdr run`` on a recording."""
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+    with collect_warnings():
         run_recording(rec_dir, out, force=True)
     traj = pd.read_csv(out / "trajectory.csv")
     xy = traj[["e_m", "n_m"]].to_numpy()

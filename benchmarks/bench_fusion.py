@@ -12,11 +12,12 @@ import subprocess
 import sys
 import time
 import tomllib
-import warnings
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
+
+from pdr.errors import collect_warnings
 
 AREA = "fusion"
 
@@ -216,8 +217,7 @@ def _sim_rows(seeds: list[int]) -> list[dict]:
         clean = _sim_walk("walk_30min_gps.toml", seed)
         dirty = _sim_walk("gps_outliers.toml", seed)
         steps, t0, outage = clean["steps"], clean["t_start_s"], clean["outage_start_s"]
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
+        with collect_warnings():
             graph = FactorGraphFusion().fuse(steps, gnss=clean["gnss"], t_start_s=t0)
             ekf = EkfFusion().fuse(steps, gnss=clean["gnss"], t_start_s=t0)
             g_err, e_err = _errors(graph.trajectory_, clean["truth"], outage), _errors(ekf.trajectory_, clean["truth"], outage)
@@ -283,8 +283,7 @@ def _synthetic_rows(seeds: list[int]) -> list[dict]:
     for seed in seeds:
         w = synthetic_walk(duration_s=2100.0, gnss_until_s=1800.0, seed=seed)
         outage = w["t_start_s"] + 1800.0
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
+        with collect_warnings():
             g = _errors(FactorGraphFusion().fuse(w["steps"], gnss=w["gnss"]).trajectory_, w["truth"], outage)
             e = _errors(EkfFusion().fuse(w["steps"], gnss=w["gnss"]).trajectory_, w["truth"], outage)
         end.append(g["end_pct"])
@@ -304,8 +303,7 @@ def _stride_scale_rows(seeds: list[int], bias: float = 0.9) -> list[dict]:
         w = synthetic_walk(duration_s=600.0, seed=seed)
         strides = synthetic_strides(w, bias, seed=seed)
         truth = float(np.sum(w["true_length_m"]))
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
+        with collect_warnings():
             t0 = time.perf_counter()
             plain = FactorGraphFusion(calibrate_stride_scales=False).fuse(w["steps"], gnss=w["gnss"], strides=strides)
             t1 = time.perf_counter()
@@ -333,11 +331,11 @@ def _humolire_rows() -> list[dict]:
 
     from pdr.config import load_config
     from pdr.fusion import EkfFusion, FactorGraphFusion
+    from pdr.io.datasets import dataset_dir
     from pdr.io.importers import import_recordings
     from pdr.io.recording import load_recording
 
-    with tempfile.TemporaryDirectory() as tmp, warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+    with tempfile.TemporaryDirectory() as tmp, collect_warnings():
         (path,) = import_recordings("humolire", dataset_dir("humolire_phone_landmarks") / HUMOLIRE, Path(tmp) / "humolire")
         rec = load_recording(path)
         steps = _steps_with_lengths(rec, load_config(None))
@@ -359,8 +357,10 @@ def _humolire_rows() -> list[dict]:
 
 
 SCALING_SCRIPT = """
-import json, sys, time, warnings
+import json, logging, sys, time, warnings
 warnings.simplefilter("ignore")
+logging.getLogger("pdr").addHandler(logging.NullHandler())
+logging.getLogger("pdr").propagate = False
 from benchmarks.bench_fusion import synthetic_walk
 from pdr.io.datasets import dataset_dir
 from pdr.fusion import FactorGraphFusion, IncrementalFusion

@@ -12,11 +12,11 @@ seed 3, a shorter plan). Scores:
 
 from __future__ import annotations
 
-import warnings
 
 from pdr.eval.gait_camera import score_gait_camera
 from pdr.gait.camera_estimator import FourierFormTemplates, WearableCameraGaitEstimation
 from pdr.sim.thigh_camera import FORM_SPEEDS_MPS, ThighCameraWalk, form_walk, simulate_thigh_camera, training_table
+from pdr.errors import collect_warnings
 
 AREA = "gait_camera"
 PAPER = "Watanabe et al. 2011"
@@ -46,8 +46,7 @@ def estimate(sim: ThighCameraWalk, templates: FourierFormTemplates, start_error=
     """Run the estimator from the true start pose offset by ``start_error`` (m, m, rad)."""
     tr = sim.truth
     est = WearableCameraGaitEstimation(templates=templates, camera=sim.camera)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+    with collect_warnings():
         return est.estimate(sim.frames, sim.observations, sim.points, initial_e_m=float(tr.e_m[0]) + start_error[0],
                             initial_n_m=float(tr.n_m[0]) + start_error[1],
                             initial_heading_rad=float(tr.heading_rad[0]) + start_error[2])

@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import tempfile
 import time
-import warnings
 from pathlib import Path
 
 import numpy as np
@@ -36,6 +35,7 @@ from pdr.pipelines.gait_forms import fit_forms, per_form_step_lengths, recording
 from pdr.pipelines.steps import detect_steps
 from pdr.sim.simulator import simulate
 from pdr.step_length.io import model_from_config, model_from_dict
+from pdr.errors import collect_warnings
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIO = ROOT / "configs" / "sim" / "gait_forms_mix.toml"
@@ -59,8 +59,7 @@ def _simulated(seeds, tmp: Path) -> list[Path]:
     raw = read_toml(SCENARIO, what="scenario")
     out = []
     for s in seeds:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
+        with collect_warnings():
             out.append(save_recording(simulate(raw, s, default_id=SCENARIO.stem), tmp / f"mix_{s}"))
     return out
 
@@ -74,8 +73,7 @@ def _distance_errors(paths: list[Path], forms_path: Path) -> dict[str, list[floa
     for p in paths:
         rec = load_recording(p)
         truth = float(rec.reference["summary"]["distance_m"])
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
+        with collect_warnings():
             steps = detect_steps(rec, {})
             base = model_from_config({})
             steps = base.prepare(steps, rec)
@@ -90,15 +88,13 @@ def _distance_errors(paths: list[Path], forms_path: Path) -> dict[str, list[floa
 
 
 def _gaitmap_cycles(tmp: Path) -> pd.DataFrame:
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+    with collect_warnings():
         recs = {p.name: load_recording(p) for p in import_recordings("gaitmap", dataset_dir("gaitmap_foot_imu_mocap"),
                                                                     tmp / "gm", rate_hz=204.8)}
     label = {"walk_2x20m": "level", "stairs_up": "stairs_up", "stairs_down": "stairs_down"}
     tables = []
     for name, rec in recs.items():
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
+        with collect_warnings():
             cyc = recording_cycles(rec, {})
             slope = pd.Series(np.nan, index=cyc.index)
             for foot, imu in foot_imus(rec).items():
@@ -134,8 +130,7 @@ def _gnss_outage_errors(seeds, forms_path: Path, tmp: Path) -> dict[str, list[tu
     config.write_text(f'[gait_forms]\nforms = "{forms_path}"\n')
     out = {"per-form": [], "one regression": []}
     for s in seeds:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
+        with collect_warnings():
             rec = save_recording(simulate(raw, s, default_id=SCENARIO.stem), tmp / f"gnss_{s}")
             for name, cfg in (("per-form", config), ("one regression", None)):
                 run_recording(rec, tmp / f"run_{name}_{s}", config_path=cfg)
@@ -161,15 +156,13 @@ def run(quick: bool = False) -> list[dict]:
         train = _simulated(train_seeds, tmp)
         test = _simulated(test_seeds, tmp)
         forms_path = tmp / "forms.json"
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
+        with collect_warnings():
             fit_forms(train, forms_path)
         forms, _ = load_forms(forms_path)
         cycles, truth = [], []
         for p in test:
             rec = load_recording(p)
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
+            with collect_warnings():
                 c = recording_cycles(rec, {})
             cycles.append(c)
             truth.append(sim_truth(rec, c))
@@ -233,8 +226,7 @@ def run(quick: bool = False) -> list[dict]:
     pred = np.empty(len(gm), dtype=object)
     for u in dict.fromkeys(units):
         te = units == u
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
+        with collect_warnings():
             f = FourierGaitForms(n_forms=6).fit(gm[~te])
         pred[te] = _three_way(f.classify(gm[te]).cycles_forms_["kind"].to_numpy())
     case = (f"gaitmap shoe IMUs (walk 2x20 m, stairs up, stairs down; {len(gm)} strides), leave one recording-foot "

@@ -11,7 +11,6 @@ Run with ``.venv/bin/python -m benchmarks heading`` (``--quick``: one seed).
 from __future__ import annotations
 
 import tempfile
-import warnings
 from pathlib import Path
 
 import numpy as np
@@ -20,6 +19,7 @@ from pdr.heading.step_heading import wrap
 from pdr.io.recording import load_recording
 from pdr.pipelines.steps import detect_steps
 from pdr.sim import simulate_to_disk
+from pdr.errors import collect_warnings
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIO = ROOT / "configs" / "sim" / "walk_forms.toml"
@@ -42,8 +42,7 @@ def heading_errors(rec) -> tuple[np.ndarray, np.ndarray]:
 def run(quick: bool = False) -> list[dict]:
     seeds = [1] if quick else [1, 2, 3]
     err, running = [], []
-    with tempfile.TemporaryDirectory() as tmp, warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+    with tempfile.TemporaryDirectory() as tmp, collect_warnings():
         for seed in seeds:
             path = simulate_to_disk(SCENARIO, Path(tmp) / f"wf{seed}", seed=seed, force=True)
             e, r = heading_errors(load_recording(path))

@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import tempfile
 import time
-import warnings
 from pathlib import Path
 
 import numpy as np
@@ -17,6 +16,7 @@ from pdr.io.datasets import data_dir
 from pdr.constants import GRAVITY_MPS2
 from pdr.io.importers import import_recordings
 from pdr.io.recording import Recording, load_recording, save_recording
+from pdr.errors import collect_warnings
 
 ROOT = Path(__file__).resolve().parents[1]
 DATASETS = data_dir()
@@ -81,8 +81,7 @@ def run(quick: bool = False) -> list[dict]:
                 continue
 
             def one_import() -> None:
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore")
+                with collect_warnings():
                     import_recordings(fmt, src, Path(tmp) / f"imp{next(counter)}", rate_hz=rate)
 
             rows.append({"area": "io", "case": f"import {case}", "metric": "time", "ours": round(_best_of(one_import, repeats), 3),

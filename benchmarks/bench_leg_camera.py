@@ -8,7 +8,6 @@ without slip, double support, per-step variability; written by another work stre
 from __future__ import annotations
 
 import time
-import warnings
 
 import cv2
 import numpy as np
@@ -18,6 +17,7 @@ from pdr.pipelines.leg_camera import forward_flow
 from pdr.sim.camera import CameraModel, load_texture, render_leg_camera
 from pdr.sim.gait import Body, WalkKinematics
 from pdr.slip.fit import SlipOpticalFlowStride, calibrate_slip_body
+from pdr.errors import collect_warnings
 
 AREA = "leg_camera"
 THESIS = "Liu MS thesis"
@@ -111,8 +111,7 @@ def _body(height_m=1.75):
 
 
 def _fit(est, flow):
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+    with collect_warnings():
         est.estimate(flow.t_s.to_numpy(), forward_flow(flow), flow.quality.to_numpy())
     return est
 

@@ -16,7 +16,6 @@ Run: ``.venv/bin/python -m benchmarks mechanics`` (``--quick``: two people).
 from __future__ import annotations
 
 import tempfile
-import warnings
 from pathlib import Path
 
 import numpy as np
@@ -30,6 +29,7 @@ from pdr.pipelines.run import run_recording
 from pdr.sim import simulate
 from pdr.sim.sensors import ImuSpec, SensorPose
 from pdr.sim.simulator import build_walk, parse_scenario
+from pdr.errors import collect_warnings
 
 AREA = "mechanics"
 SPEEDS_MPS = (0.8, 1.0, 1.2, 1.4, 1.6, 1.8)
@@ -91,8 +91,7 @@ def _simulated(tmp: Path, people, placement: str, gnss: dict) -> pd.DataFrame:
         sc = _scenario(height, mass, placement, gnss)
         rec = simulate(sc, seed=seed)
         path = save_recording(rec, tmp / f"{placement}_{seed}", force=True)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
+        with collect_warnings():
             run_recording(path, tmp / f"out_{placement}_{seed}", force=True)
         ours = pd.read_csv(tmp / f"out_{placement}_{seed}" / "bouts.csv")
         m = _matched(ours, rec.reference["bouts"]).assign(person=seed)
@@ -130,8 +129,7 @@ def _real_rows(tmp: Path) -> list[dict]:
     bouts = []
     for participant in ("001", "002"):
         src = dataset_dir("mobgap_lowerback_tvs_lab") / "lab" / "HA" / participant
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
+        with collect_warnings():
             for path in import_recordings("mobgap", src, tmp / "mobgap" / participant):
                 out = tmp / "mobgap_out" / participant / path.name
                 run_recording(path, out, force=True)
@@ -163,8 +161,7 @@ def _speed_row(tmp: Path, quick: bool) -> dict:
           "segment": [{"duration_s": 5, "speed_mps": 0.0}, {"duration_s": 60 * minutes - 10, "speed_mps": 1.3},
                       {"duration_s": 5, "speed_mps": 0.0}]}
     path = save_recording(simulate(sc, seed=5), tmp / "long", force=True)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+    with collect_warnings():
         summary = run_recording(path, tmp / "long_out", force=True)
     t = summary["timings_s"]
     return _row(f"{minutes} min at 100 Hz, waist, GNSS 1 Hz", "bouts stage / whole pdr run",

@@ -15,7 +15,6 @@ import json
 import os
 import subprocess
 import tempfile
-import warnings
 from pathlib import Path
 
 import numpy as np
@@ -23,6 +22,7 @@ import pandas as pd
 
 from benchmarks.bench_step_length import DATASETS, _bout_distance_reference_ics, _mobgap_recordings, _reference_steps
 from pdr.step_length import MODELS
+from pdr.errors import collect_warnings
 
 ROOT = Path(__file__).resolve().parents[1]
 PEER_SCRIPT = Path(__file__).parent / "peers" / "mobgap_stride_length.py"
@@ -44,8 +44,7 @@ def _row(case: str, metric: str, ours: float, unit: str, target: str, anchor: st
 def _ours(tmp: Path) -> pd.DataFrame:
     """pdr's per-bout distance with the reference ICs (the zijlstra population preset), and the reference."""
     rows = []
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+    with collect_warnings():
         for rec in _mobgap_recordings(tmp):
             path = rec.path / "reference" / "bouts.csv"
             bouts = pd.read_csv(path) if path.is_file() else pd.DataFrame()

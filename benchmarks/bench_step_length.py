@@ -37,6 +37,7 @@ from pdr.pipelines.steps import detect_steps
 from pdr.signals import uniform_imu
 from pdr.steps import acc_norm_signal, step_features
 from pdr.step_length import MODELS, RegressionStepLength, ZijlstraStepLength, body_model, with_signal_features
+from pdr.errors import collect_warnings
 
 ROOT = Path(__file__).resolve().parents[1]
 DATASETS = data_dir()
@@ -103,8 +104,7 @@ def _mobgap_rows(tmp: Path) -> list[dict]:
     recs = _mobgap_recordings(tmp)
     anchor = "mobgap SlZijlstra, Zijlstra & Hof 2003 inverted pendulum, K = 4.739/4 (Soltani et al. 2021)"
     results: dict[tuple[str, str, str], list[tuple[float, float]]] = {}
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+    with collect_warnings():
         for rec in recs:
             path = rec.path / "reference" / "bouts.csv"  # the importer's per-bout INDIP reference
             bouts = pd.read_csv(path) if path.is_file() else pd.DataFrame()
@@ -181,8 +181,7 @@ def _people_rows(quick: bool) -> list[dict]:
     groups = [("[tuning]", 1.75, "healthy", [0, 1])]  # other people in every group: seeds 10-13, 14-17, ...
     groups += [("[test]", h, cohort, list(range(10 + 4 * i, 10 + 4 * i + n))) for i, (h, cohort) in enumerate(tests)]
     rows = []
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+    with collect_warnings():
         for tag, height, cohort, group_seeds in groups:
             speeds = COHORT_SPEEDS_MPS[cohort]
             res = np.array([_person_errors(height, cohort, s, speeds) for s in group_seeds])
@@ -209,8 +208,7 @@ def _humolire_rows(tmp: Path) -> list[dict]:
     dist2 = float(np.hypot(np.diff(lap2["e_m"]), np.diff(lap2["n_m"])).sum())
     anchor = "Ladetto et al. 2000: 1.8% over 2,300 m after calibration (DGPS)"
     rows = []
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+    with collect_warnings():
         steps = with_signal_features(detect_steps(rec, {}), rec)
         t = steps["t_s"]
         sel = ((t > lap2["t_s"].iloc[0]) & (t <= lap2["t_s"].iloc[-1])).to_numpy()
@@ -319,8 +317,7 @@ def _simulated_case(tmp: Path, seed: int, plot: bool, config: Path = SIM_CONFIG)
     from pdr.sim import simulate_to_disk
 
     rec = load_recording(simulate_to_disk(config, tmp / f"{config.stem}_{seed}", seed=seed, force=True))
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+    with collect_warnings():
         steps = detect_steps(rec, {})
     gnss = gnss_local(rec, gnss_settings({})).drop(columns="masked")
     t = steps["t_s"].to_numpy(float)
@@ -421,8 +418,7 @@ def _graph_rows(tmp: Path, quick: bool) -> list[dict]:
         for seed in ([0] if quick else [0, 1, 2]):
             rec = simulate_to_disk(ROOT / "configs" / "sim" / f"{cfg}.toml", tmp / f"run_{cfg}_{seed}", seed=seed, force=True)
             for model in (None, model_path):
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore")
+                with collect_warnings():
                     summary = run_recording(rec, tmp / "run_out", model_path=model, force=True)
                 said = any("did not converge" in w.get("message", "") for w in summary["warnings"])
                 runs.append((summary["solver"]["converged"], said, summary["step_model"]["params"].get("b_m_per_hz")))

@@ -3,13 +3,17 @@
 from __future__ import annotations
 
 import os
+import re
+from contextlib import contextmanager
 from pathlib import Path
+from typing import Iterator
 
 import numpy as np
 import pandas as pd
 import pytest
 
 from pdr.constants import GRAVITY_MPS2
+from pdr.errors import collect_warnings
 from pdr.io.datasets import DATA_DIR_VARIABLE, data_dir, missing_files
 from pdr.io.recording import Recording, save_recording
 
@@ -29,6 +33,16 @@ def real_dataset(name: str) -> Path:
             pytest.fail(reason, pytrace=False)
         pytest.skip(reason)
     return DATASETS / name
+
+
+@contextmanager
+def warns(match: str | None = None) -> Iterator[list[str]]:
+    """Assert that the block reports a warning (pdr's logger or a Python warning) whose text matches ``match`` (a regex
+    searched in each line; any warning when None). Yields the collected lines."""
+    with collect_warnings() as messages:
+        yield messages
+    if not any(match is None or re.search(match, m) for m in messages):
+        pytest.fail(f"no warning matching {match!r}; got {messages}", pytrace=False)
 
 
 def pytest_configure(config):

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import warnings
 from pathlib import Path
 
 import numpy as np
@@ -14,9 +13,10 @@ from pdr.calibration import AdaptiveKalmanCalibration, RecursiveStepCalibration,
 from pdr.calibration.segments import clean_fixes
 from pdr.cli.main import main
 from pdr.constants import GRAVITY_MPS2
-from pdr.errors import InputError
+from pdr.errors import InputError, collect_warnings
 from pdr.io.recording import Recording, load_recording, save_recording
 from pdr.step_length import RegressionStepLength, ZijlstraStepLength, load_model
+from conftest import warns
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -111,7 +111,7 @@ def test_gates_reject_poor_fixes_curves_and_pauses():
     freq = np.full(300, 1.8)
     steps, gnss, _ = synthetic_walk(freq, h_acc_m=0.5, seed=5)
     poor = gnss.assign(h_acc_m=25.0)
-    with pytest.warns(UserWarning, match="no distance segment"):
+    with warns(match="no distance segment"):
         akf = AdaptiveKalmanCalibration().fit(steps, poor, CONSTANT)
     assert akf.updated_ == "none" and len(akf.segments_) == 0
     assert akf.model_.get_params() == CONSTANT.get_params()
@@ -146,8 +146,7 @@ def test_bad_gnss_and_steps_input():
         akf.fit([steps, steps], [gnss], CONSTANT)
     with pytest.raises(InputError, match="segment_steps"):
         AdaptiveKalmanCalibration(segment_steps=0).fit(steps, gnss, CONSTANT)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+    with collect_warnings():
         empty = akf.fit(steps.iloc[:0], gnss, CONSTANT)
     assert empty.updated_ == "none" and empty.step_length_m_.shape == (0,)
 

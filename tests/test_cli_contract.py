@@ -335,3 +335,44 @@ def test_help_of_every_command_says_what_it_writes_with_an_example(capsys):
         assert exc.value.code == 0 and "writes:" in text and "example:\n  pdr " in text, names
         assert sub.description, names
         assert all(a.help for a in sub._actions), (names, [a.dest for a in sub._actions if not a.help])
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Warnings: one channel (the pdr logger), one warning: line each on the CLI
+# ---------------------------------------------------------------------------------------------------------------
+
+
+def _low_rate_recording(tmp_path: Path) -> Path:
+    imu = make_imu(duration_s=20.0, rate_hz=100.0).iloc[::25].reset_index(drop=True)  # 4 Hz: below twice the cadence
+    return save_recording(Recording(meta={"recording": {"id": "slow", "placement": "waist"}}, imu=imu), tmp_path / "rec")
+
+
+def test_library_warnings_are_log_records_not_python_warnings(tmp_path, caplog):
+    import logging
+    import warnings
+
+    from pdr.pipelines.steps import detect_steps
+    from pdr.io.recording import load_recording
+
+    rec = load_recording(_low_rate_recording(tmp_path))
+    with warnings.catch_warnings(record=True) as python_warnings, caplog.at_level(logging.WARNING, logger="pdr"):
+        warnings.simplefilter("always")
+        detect_steps(rec, {})
+    assert not python_warnings  # a notebook user or a test suite is not sprayed with UserWarnings
+    records = [r for r in caplog.records if r.name == "pdr" and r.levelno == logging.WARNING]
+    assert len(records) == 1 and "below twice the highest cadence" in records[0].getMessage()
+
+
+def test_cli_prints_each_warning_once_even_with_logging_configured(tmp_path, capsys):
+    import logging
+
+    root = logging.getLogger()
+    handler = logging.StreamHandler()  # an application that configured logging: the CLI's line is still the only one
+    root.addHandler(handler)
+    try:
+        code, _, err = _cli(["validate", _low_rate_recording(tmp_path)], capsys)
+    finally:
+        root.removeHandler(handler)
+    lines = [line for line in err.splitlines() if "highest cadence" in line]
+    assert code == 0 and len(lines) == 1 and lines[0].startswith("warning: slow: sampling rate"), err
+    assert logging.getLogger("pdr").handlers == [] and logging.getLogger("pdr").propagate  # restored after the command

@@ -4,7 +4,6 @@ data only) and ``pdr run`` (keeps going, widens the uncertainty, lists every int
 from __future__ import annotations
 
 import json
-import warnings
 from pathlib import Path
 
 import numpy as np
@@ -13,7 +12,7 @@ import pytest
 
 from pdr.cli.main import main
 from pdr.constants import GRAVITY_MPS2
-from pdr.errors import InputError
+from pdr.errors import InputError, collect_warnings
 from pdr.io.recording import load_recording, save_recording
 from pdr.io.tomlio import read_toml
 from pdr.pipelines.faults import FAULT_HEADING_CHANGE_STD_RAD, FAULT_LENGTH_STD_FRACTION, widen_steps
@@ -137,8 +136,7 @@ def test_detector_bad_input_and_config():
 
 @pytest.fixture(scope="module")
 def sim_walk():
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+    with collect_warnings():
         raw = read_toml(ROOT / "configs" / "sim" / "walk_short.toml")
         raw["segment"][3]["speed_mps"] = 3.0  # a run: the accelerometer goes beyond 2 g
         return simulate(raw, seed=2)

@@ -11,6 +11,7 @@ import pytest
 from pdr.errors import InputError
 from pdr.flow import CorrelationOpticalFlow, InterpolationOpticalFlow, PhaseCorrelationOpticalFlow, read_video
 from pdr.sim.camera import write_video
+from conftest import warns
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -98,7 +99,7 @@ def test_bad_input():
         CorrelationOpticalFlow().estimate(np.zeros((100, 100)), [0.0])
     with pytest.raises(InputError, match="at least"):
         CorrelationOpticalFlow(patch_px=40, grid_step_px=40, max_shift_px=20).estimate(frames, [0, 1, 2])
-    with pytest.warns(UserWarning, match="fewer than 2"):
+    with warns(match="fewer than 2"):
         assert CorrelationOpticalFlow().estimate(frames[:1], [0.0]).flow_.empty
 
 

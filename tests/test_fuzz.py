@@ -29,10 +29,8 @@ import os
 import re
 import shutil
 import signal
-import sys
 import tempfile
 import time
-import warnings
 import zipfile
 from pathlib import Path
 
@@ -47,6 +45,7 @@ from pdr.io.recording import Recording, load_recording, save_recording
 
 from conftest import DATASETS
 from pdr.io.datasets import missing_files
+from pdr.errors import collect_warnings
 
 ROOT = Path(__file__).resolve().parents[1]
 HAND = Path(__file__).resolve().parent / "importers"
@@ -276,10 +275,6 @@ def _alarm(signum, frame):
     raise CaseTimeout()
 
 
-def _show_warning(message, category, filename, lineno, file=None, line=None):
-    sys.stderr.write(warnings.formatwarning(message, category, filename, lineno, line))
-
-
 def _listing(folder: Path) -> dict[str, bytes]:
     if not folder.exists():
         return {}
@@ -296,9 +291,7 @@ def run_cli(argv: list[str], case_dir: Path, target: str) -> tuple[int, str, str
     t0 = time.perf_counter()
     signal.setitimer(signal.ITIMER_REAL, CASE_TIMEOUT_S)
     try:
-        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err), warnings.catch_warnings():
-            warnings.simplefilter("always")
-            warnings.showwarning = _show_warning  # to the captured stderr, as the CLI prints them (not pytest's log)
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):  # main prints each warning to stderr
             rc = main([str(a) for a in argv])
     except CaseTimeout:
         raise AssertionError(f"{target}: a case ran longer than {CASE_TIMEOUT_S} s (a hang?)") from None
@@ -519,8 +512,7 @@ def thigh_camera(tmp_path_factory) -> dict[str, Path]:
     root = tmp_path_factory.mktemp("thigh_camera")
     plan = [("walk", 7.0, 1.3), ("fast_walk", 7.0, 1.8), ("walk", 7.0, 1.3)]
     training_table([plan], subject_seed=1, walk_seeds=[21]).to_csv(root / "mocap.csv", index=False)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+    with collect_warnings():
         fit_templates([root / "mocap.csv"], root / "templates.json")
     walk = form_walk([("walk", 4.0, 1.25)], subject_seed=1, walk_seed=5)
     sim = simulate_thigh_camera(walk, t_start_s=walk.t_walk_s[0], t_end_s=walk.t_walk_s[0] + 1.5, seed=5)

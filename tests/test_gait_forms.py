@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import warnings
 from pathlib import Path
 
 import numpy as np
@@ -11,7 +10,7 @@ import pandas as pd
 import pytest
 
 from pdr.cli.main import main
-from pdr.errors import InputError
+from pdr.errors import InputError, collect_warnings
 from pdr.gait import amplitude_phase, fourier_coefficients, fourier_derivative, fourier_series, from_amplitude_phase
 from pdr.gait.cycles import MAX_CYCLE_S, foot_cycles, foot_layout, imu_cycles, imu_layout, side_convention
 from pdr.gait.forms import PENDULUM_K, TURN_MIN_RAD_PER_CYCLE, FourierGaitForms, load_forms, pendulum_speed_mps, speed_kind
@@ -20,7 +19,7 @@ from pdr.pipelines.gait_forms import classify_forms, recording_cycles
 from pdr.sim.simulator import simulate
 from pdr.signals import estimate_attitude, uniform_imu
 
-from conftest import DATASETS
+from conftest import DATASETS, warns
 
 ROOT = Path(__file__).resolve().parents[1]
 GAITMAP = DATASETS / "gaitmap_foot_imu_mocap"
@@ -81,8 +80,7 @@ def test_side_convention_puts_phase_shifted_cycles_together():
 def sim_recs(tmp_path_factory) -> list[Path]:
     base = tmp_path_factory.mktemp("gait_forms")
     out = []
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+    with collect_warnings():
         for seed in (0, 1):
             out.append(save_recording(simulate(SCENARIO, seed), base / f"mix{seed}"))
     return out
@@ -97,8 +95,7 @@ def _truth_kind(rec, cycles: pd.DataFrame) -> np.ndarray:
 
 def test_imu_cycles_are_strides_with_the_layout(sim_recs):
     rec = load_recording(sim_recs[0])
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+    with collect_warnings():
         cyc = recording_cycles(rec, {})
     assert set(imu_layout()) <= set(cyc.columns)
     assert len(cyc) > 50
@@ -122,18 +119,17 @@ def test_cycles_too_short_or_too_long_are_dropped_with_a_warning(sim_recs):
     att = estimate_attitude(u)
     t = np.array([10.0, 10.5, 11.0, 11.1, 11.2, 11.3, 20.0, 20.5, 21.0])  # good, too short, too long (one bout)
     steps = pd.DataFrame({"t_s": t, "bout_id": 0, "heading_rad": 0.0})
-    with pytest.warns(UserWarning, match="dropped as not gait"):
+    with warns(match="dropped as not gait"):
         cyc = imu_cycles(u, att, steps)
     assert len(cyc) == 2 and (cyc["duration_s"] <= MAX_CYCLE_S).all() and (cyc["duration_s"] >= 0.5).all()
-    with pytest.warns(UserWarning, match="no gait cycle"):
+    with warns(match="no gait cycle"):
         empty = imu_cycles(u, att, steps.iloc[:2])
     assert len(empty) == 0 and set(imu_layout()) <= set(empty.columns)
 
 
 # ---------------------------------------------------------------------------------------------------- forms
 def test_forms_learnt_on_one_walk_name_the_cycles_of_another(sim_recs):
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+    with collect_warnings():
         train, test = (recording_cycles(load_recording(p), {}) for p in sim_recs)
     forms = FourierGaitForms().fit(train)
     assert forms.components_.shape == (3, len(imu_layout()))
@@ -174,8 +170,7 @@ def test_each_walking_cycle_is_named_by_its_own_froude_number(sim_recs):
     # regression (issue 7): k-means boundaries did not follow the Froude bands for people unseen in training (a fast
     # walk with longer steps at a lower cadence fell into the walk form); a level walking cycle is now named by the
     # Froude number of its inverted-pendulum speed, which needs only the leg length
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+    with collect_warnings():
         train, test = (recording_cycles(load_recording(p), {}) for p in sim_recs)
     forms = FourierGaitForms().fit(train)
     got = forms.classify(test).cycles_forms_
@@ -216,8 +211,7 @@ def test_each_walking_cycle_is_named_by_its_own_froude_number(sim_recs):
 
 def test_cli_round_trip_and_forms_file_errors(sim_recs, tmp_path, capsys):
     forms_path = tmp_path / "forms.json"
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+    with collect_warnings():
         assert main(["gait-forms", "fit", str(sim_recs[0]), "-o", str(forms_path)]) == 0
         assert main(["gait-forms", "classify", str(sim_recs[1]), "--forms", str(forms_path),
                      "-o", str(tmp_path / "forms.csv")]) == 0
@@ -245,13 +239,12 @@ def test_cli_round_trip_and_forms_file_errors(sim_recs, tmp_path, capsys):
 
 def test_recording_without_cycles_gives_an_empty_table(sim_recs, tmp_path, small_recording):
     forms_path = tmp_path / "forms.json"
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+    with collect_warnings():
         main(["gait-forms", "fit", str(sim_recs[0]), "-o", str(forms_path)])
     still = load_recording(small_recording)
     still.imu[[c for c in still.imu.columns if c.startswith("acc_")]] = [0.0, 0.0, 9.80665]
     still_path = save_recording(still, tmp_path / "still")
-    with pytest.warns(UserWarning, match="no gait cycle|no walking"):
+    with warns(match="no gait cycle|no walking"):
         out = classify_forms(still_path, forms_path, tmp_path / "still.csv")
     table = pd.read_csv(out)
     assert len(table) == 0 and list(table.columns[:3]) == ["t_start_s", "t_end_s", "form"]
@@ -259,14 +252,12 @@ def test_recording_without_cycles_gives_an_empty_table(sim_recs, tmp_path, small
 
 @pytest.mark.real_data("gaitmap_foot_imu_mocap")
 def test_shoe_imu_cycles_climb_on_stairs(tmp_path):
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+    with collect_warnings():
         main(["import", "gaitmap", str(GAITMAP), str(tmp_path), "--rate-hz", "204.8"])
     slope = {}
     for name in ("walk_2x20m", "stairs_up", "stairs_down"):
         rec = load_recording(tmp_path / name)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
+        with collect_warnings():
             cyc = recording_cycles(rec, {})
         assert set(cyc["source"]) == {"foot_left", "foot_right"}
         assert set(foot_layout()) <= set(cyc.columns)
@@ -281,8 +272,7 @@ def test_run_uses_per_form_step_models(sim_recs, tmp_path):
     from pdr.pipelines.run import run_recording
 
     forms_path = tmp_path / "forms.json"
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+    with collect_warnings():
         main(["gait-forms", "fit", str(sim_recs[0]), "-o", str(forms_path)])
         cfg = tmp_path / "run.toml"
         cfg.write_text('[gait_forms]\nforms = "forms.json"\n')  # relative to the configuration file
@@ -311,8 +301,7 @@ def test_run_uses_per_form_step_models(sim_recs, tmp_path):
 def test_classification_settings_from_the_configuration(sim_recs, tmp_path):
     cfg = tmp_path / "fit.toml"
     cfg.write_text("[gait_forms]\ncycle_speed_check = false\nsmoothing = true\n")
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+    with collect_warnings():
         assert main(["gait-forms", "fit", str(sim_recs[0]), "-o", str(tmp_path / "forms.json"), "--config", str(cfg)]) == 0
     forms, _ = load_forms(tmp_path / "forms.json")
     assert forms.cycle_speed_check is False and forms.smoothing is True  # kept in the forms file

@@ -13,6 +13,7 @@ from pdr.io.recording import Recording
 from pdr.pipelines.steps import detect_steps
 from pdr.signals import estimate_attitude, uniform_imu, yaw_increments
 from pdr.signals.attitude import quat_mul
+from conftest import warns
 
 
 def rz(a: np.ndarray) -> np.ndarray:
@@ -111,7 +112,7 @@ def test_mag_heading_absolute(offset):
 def test_no_gyro_heading_change_zero_with_large_std():
     imu, _ = turning_walk(offset_rad=0.0, turn_rad=0.0)
     imu = imu[["t_s", "acc_x_mps2", "acc_y_mps2", "acc_z_mps2"]]
-    with pytest.warns(UserWarning, match="no gyroscope"):
+    with warns(match="no gyroscope"):
         table = detect_steps(Recording(meta={"recording": {"id": "ng", "placement": "hand"}}, imu=imu), {})
     assert (table.heading_change_rad == 0).all() and (table.heading_change_std_rad >= 1.0).all()
 

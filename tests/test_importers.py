@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import shutil
 import stat
-import warnings
 import zipfile
 from pathlib import Path
 
@@ -15,12 +14,12 @@ import pytest
 
 from pdr.cli.main import main
 from pdr.constants import GRAVITY_MPS2
-from pdr.errors import InputError
+from pdr.errors import InputError, collect_warnings
 from pdr.io.importers import import_recordings
 from pdr.io.importers import _common
 from pdr.io.recording import load_recording
 
-from conftest import DATASETS, real_dataset
+from conftest import DATASETS, real_dataset, warns
 
 ROOT = Path(__file__).resolve().parents[1]
 HAND = Path(__file__).resolve().parent / "importers"
@@ -34,10 +33,9 @@ REAL_FORMATS = {"xio": "xio_foot_imu_loop_walk", "oxford": "oxford_step_counter"
 
 
 def _import(fmt, src, dest, **kw):
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
+    with collect_warnings() as caught:
         paths = import_recordings(fmt, Path(src), Path(dest), **kw)
-    return paths, [str(w.message) for w in caught]
+    return paths, list(caught)
 
 
 def _median_acc(rec) -> float:
@@ -637,7 +635,7 @@ def test_cli_prints_one_path_per_recording(tmp_path, capsys):
 def test_wild_jitter_is_resampled_with_a_warning_and_steady_clock_is_kept():
     t = np.cumsum(np.tile([0.001, 0.009], 200))  # interquartile ratio 9: "varies wildly"
     values = np.column_stack([np.sin(t), 2 * t])
-    with pytest.warns(UserWarning, match="resampled linearly to a uniform 200 Hz grid"):
+    with warns(match="resampled linearly to a uniform 200 Hz grid"):
         t_new, v_new = _common.steady_clock(t, values, "x")
     np.testing.assert_allclose(np.diff(t_new), 0.005)
     np.testing.assert_allclose(v_new[:, 1], 2 * t_new, atol=1e-12)
@@ -657,7 +655,7 @@ def test_resample_mean_is_the_window_average():
 
 def test_increasing_mask_drops_repeats_and_back_steps():
     t = np.r_[0.0, 0.1, 0.1, 0.2, 0.15, 0.3, np.arange(0.4, 10.0, 0.1)]
-    with pytest.warns(UserWarning, match="dropped 2 sample"):
+    with warns(match="dropped 2 sample"):
         keep = _common.increasing_mask(t, "x")
     assert keep[:6].tolist() == [True, True, False, True, False, True] and keep[6:].all()
     with pytest.raises(InputError, match="clock jump or an unsorted file"):

@@ -7,7 +7,6 @@ moves on at the vehicle's speed, every later fix shifted by the distance driven.
 from __future__ import annotations
 
 import json
-import warnings
 
 import numpy as np
 import pandas as pd
@@ -17,6 +16,7 @@ from pdr.cli.main import main
 from pdr.io.recording import load_recording, save_recording
 from pdr.pipelines.run import run_recording
 from pdr.sim.simulator import simulate
+from pdr.errors import collect_warnings
 
 WALK_S, RIDE_S = 60.0, 120.0
 
@@ -63,10 +63,9 @@ def test_vehicle_and_bicycle_stretches_have_no_steps_and_a_warning(tmp_path, kin
     truth = rec.reference["steps"]["t_s"].to_numpy()
     rec, (a, b) = _ride(rec, kind, speed_mps)
     path = save_recording(rec, tmp_path / "rec")
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
+    with collect_warnings() as caught:
         summary = run_recording(path, tmp_path / "out")
-    messages = [str(w.message) for w in caught]
+    messages = list(caught)
     steps = pd.read_csv(tmp_path / "out" / "steps.csv")
     t = steps["t_s"].to_numpy()
     assert not ((t > a) & (t < b)).any()
@@ -89,10 +88,9 @@ def test_five_hz_recording_follows_the_gnss_and_says_why(tmp_path, capsys):
     imu = rec.imu.iloc[: len(rec.imu) // block * block]
     rec.imu = imu.groupby(np.arange(len(imu)) // block).mean().reset_index(drop=True)
     path = save_recording(rec, tmp_path / "rec")
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
+    with collect_warnings() as caught:
         summary = run_recording(path, tmp_path / "out")
-    messages = " ".join(str(w.message) for w in caught)
+    messages = " ".join(caught)
     assert summary["n_steps"] == 0
     assert "below twice the highest cadence" in messages and "follows the GNSS alone" in messages
     truth_m = 1.3 * 180.0

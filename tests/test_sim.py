@@ -17,6 +17,7 @@ from pdr.io.recording import load_recording
 from pdr.sim import WalkKinematics, simulate, simulate_to_disk
 from pdr.sim.sensors import ImuSpec, SensorPose, true_motion
 from pdr.sim.simulator import build_walk, parse_scenario
+from conftest import warns
 
 ROOT = Path(__file__).resolve().parents[1]
 SHORT = ROOT / "configs" / "sim" / "walk_short.toml"
@@ -328,7 +329,7 @@ def test_cli_simulate_and_errors(tmp_path, capsys):
 
 
 def test_a_too_short_walk_warns_and_stands():
-    with pytest.warns(UserWarning, match="too short"):
+    with warns(match="too short"):
         rec = simulate(_scenario([(2.0, 0.0), (0.6, 1.2), (3.0, 0.0), (15.0, 1.2)], gnss={"enabled": False}), seed=1)
     assert rec.reference["steps"]["t_s"].min() > 5.6  # no step in the 0.6 s burst
 

@@ -11,6 +11,7 @@ from pdr.constants import GRAVITY_MPS2
 from pdr.errors import InputError
 from pdr.slip import SlipBody, simulate_flow, simulate_step, stride_kinematics
 from pdr.slip.fit import SlipOpticalFlowStride, segment_strides
+from conftest import warns
 
 BODY = SlipBody()
 
@@ -88,10 +89,10 @@ def test_fit_bad_and_degenerate_input():
         est.estimate([0.0, 0.2, 0.1], [1.0, 2.0, 3.0])
     with pytest.raises(InputError, match="one length"):
         est.estimate([0.0, 0.1], [1.0])
-    with pytest.warns(UserWarning, match="no complete stride"):
+    with warns(match="no complete stride"):
         assert est.estimate(np.arange(100) * 0.01, np.zeros(100)).strides_.empty
     t = np.arange(0, 5, 0.01)
-    with pytest.warns(UserWarning, match="no complete stride"):  # no flow at all (blank floor): no stride
+    with warns(match="no complete stride"):  # no flow at all (blank floor): no stride
         assert est.estimate(t, np.full(len(t), np.nan)).strides_.empty
     with pytest.raises(InputError, match="positive"):
         SlipBody(thigh_length_m=-0.5)

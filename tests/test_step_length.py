@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import warnings
 
 import numpy as np
 import pandas as pd
@@ -12,7 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pdr.constants import GRAVITY_MPS2
-from pdr.errors import InputError
+from pdr.errors import InputError, collect_warnings
 from pdr.step_length import (
     KimStepLength,
     RegressionStepLength,
@@ -24,6 +23,7 @@ from pdr.step_length import (
     vertical_excursion_m,
     with_signal_features,
 )
+from conftest import warns
 
 
 def walk_features(n: int, rng: np.random.Generator) -> pd.DataFrame:
@@ -77,7 +77,7 @@ def test_single_frequency_fits_a_only():
     rng = np.random.default_rng(3)
     steps = pd.DataFrame({"step_freq_hz": np.full(50, 1.8), "acc_var_m2ps4": np.full(50, 3.0)})
     m = RegressionStepLength.population()
-    with pytest.warns(UserWarning, match="a_m only"):
+    with warns(match="a_m only"):
         m.fit(steps, 0.75 + 0.02 * rng.standard_normal(50))
     assert m.b_m_per_hz == RegressionStepLength.preset["b_m_per_hz"] and m.c_m_per_m2ps4 == 0.0
     assert m.estimate(steps).step_length_m_.mean() == pytest.approx(0.75, abs=0.01)
@@ -93,8 +93,7 @@ def test_scaling_a_feature_and_its_coefficient_is_invariant(scale, c):
     scaled = steps.assign(acc_var_m2ps4=steps.acc_var_m2ps4 * scale)
     cov = np.diag([0.01, 0.004, 1e-4 / scale ** 2]).tolist()
     m2 = RegressionStepLength(a_m=0.2, b_m_per_hz=0.25, c_m_per_m2ps4=c / scale, residual_std_m=0.05, covariance=cov)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+    with collect_warnings():
         a, b = m.estimate(steps), m2.estimate(scaled)
     np.testing.assert_allclose(a.step_length_m_, b.step_length_m_, rtol=1e-9, atol=1e-12)
     np.testing.assert_allclose(a.step_length_std_m_, b.step_length_std_m_, rtol=1e-9)
@@ -211,7 +210,7 @@ def test_bad_steps_input():
         m.estimate(pd.DataFrame({"step_freq_hz": [108.0], "acc_var_m2ps4": [3.0]}))  # steps/min, not Hz
     with pytest.raises(InputError, match=">= 0"):
         m.estimate(pd.DataFrame({"step_freq_hz": [-1.8], "acc_var_m2ps4": [3.0]}))
-    with pytest.warns(UserWarning, match="without a finite step_freq_hz"):
+    with warns(match="without a finite step_freq_hz"):
         est = m.estimate(pd.DataFrame({"step_freq_hz": [1.8, np.nan, 2.0], "acc_var_m2ps4": [3.0, 3.0, 3.0]}))
     assert np.isfinite(est.step_length_m_).all()
     empty = m.estimate(pd.DataFrame({"step_freq_hz": [], "acc_var_m2ps4": []}))
@@ -234,6 +233,6 @@ def test_signal_features_bad_input():
         with_signal_features(pd.DataFrame({"t_s": [2.0]}), imu.iloc[::20])
     out = with_signal_features(pd.DataFrame({"t_s": []}), imu)
     assert list(out.columns) == ["t_s", "acc_range_mps2", "acc_abs_mean_mps2", "vertical_excursion_m"] and len(out) == 0
-    with pytest.warns(UserWarning, match="outside the IMU record"):
+    with warns(match="outside the IMU record"):
         out = with_signal_features(pd.DataFrame({"t_s": [2.0, 30.0]}), imu)
     assert np.isnan(out.acc_range_mps2.iloc[1])

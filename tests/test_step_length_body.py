@@ -4,7 +4,6 @@ calibration, the graph's in-run calibration guard, and the simulated people it i
 from __future__ import annotations
 
 import json
-import warnings
 from pathlib import Path
 
 import numpy as np
@@ -14,13 +13,14 @@ import pytest
 from pdr.calibration import AdaptiveKalmanCalibration
 from pdr.calibration.segments import distance_segments, landmark_distances, trajectory_distances
 from pdr.cli.main import main
-from pdr.errors import InputError
+from pdr.errors import InputError, collect_warnings
 from pdr.fusion import FactorGraphFusion
 from pdr.fusion._linear import bounded_map
-from pdr.io.recording import Recording, check_subject, load_recording, save_recording
+from pdr.io.recording import check_subject, load_recording, save_recording
 from pdr.sim import simulate
 from pdr.sim.gait import Body, GaitUser
 from pdr.step_length import RegressionStepLength, ZijlstraStepLength, body_model, choose_model, load_model
+from conftest import warns
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -46,7 +46,7 @@ def test_phone_gets_the_height_and_cadence_model_scaled_with_height():
 
 
 def test_nothing_known_says_so_once_and_uses_the_population():
-    with pytest.warns(UserWarning, match="nothing known about the person") as record:
+    with warns(match="nothing known about the person") as record:
         m, choice = body_model({}, "waist")
     assert len(record) == 1 and choice["source"] == "population"
     assert m.sensor_height_m == pytest.approx(0.53 * 1.70)
@@ -87,8 +87,7 @@ def test_run_records_the_choice_in_summary(tmp_path):
     rec = simulate({"route": {"waypoints_m": [[0, 0], [80, 0]]}, "gnss": {"enabled": False},
                     "segment": [{"duration_s": 2, "speed_mps": 0}, {"duration_s": 20, "speed_mps": 1.2}]}, seed=2)
     path = save_recording(rec, tmp_path / "rec")
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+    with collect_warnings():
         summary = run_recording(path, tmp_path / "out")
     choice = json.loads((tmp_path / "out" / "summary.json").read_text())["step_model"]["choice"]
     assert choice == summary["step_model"]["choice"]
@@ -119,7 +118,7 @@ def test_calibration_never_reaches_a_negative_slope():
     known = pd.DataFrame({"t_start_s": [steps.t_s[k] for k in range(0, 580, 20)],
                           "t_end_s": [steps.t_s[k + 20] for k in range(0, 580, 20)],
                           "distance_m": [length[k + 1:k + 21].sum() for k in range(0, 580, 20)], "distance_std_m": 0.05})
-    with pytest.warns(UserWarning, match="held at 0"):
+    with warns(match="held at 0"):
         akf = AdaptiveKalmanCalibration().fit(steps, None, RegressionStepLength.population(), distances=known)
     assert akf.updated_ == "all" and akf.model_.b_m_per_hz == 0.0
 
@@ -193,19 +192,17 @@ def test_graph_warns_when_the_calibration_does_not_converge_and_keeps_the_model(
     from pdr.pipelines.run import fusion_gnss, gnss_local, gnss_settings
     from pdr.pipelines.steps import detect_steps
 
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+    with collect_warnings():
         steps = detect_steps(rec, {})
     model = RegressionStepLength.for_height(rec.subject["height_m"])
     model.estimate(steps)
     steps["step_length_m"], steps["step_length_std_m"] = model.step_length_m_, model.step_length_std_m_
     gnss = fusion_gnss(gnss_local(rec, gnss_settings({})))
-    with pytest.warns(UserWarning, match="did not converge in 1 alternations"):
+    with warns(match="did not converge in 1 alternations"):
         fusion = FactorGraphFusion(max_alternations=1).fuse(steps, gnss=gnss, step_model=model)
     assert not fusion.solver_["converged"] and fusion.solver_["last_change_m"] > 0
     assert fusion.step_model_ is model
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+    with collect_warnings():
         full = FactorGraphFusion().fuse(steps, gnss=gnss, step_model=model)
     assert full.step_model_.b_m_per_hz >= 0
 
@@ -259,8 +256,7 @@ def test_cli_calibrate_from_landmarks_and_a_trajectory(tmp_path, capsys):
     from pdr.pipelines.steps import detect_steps
 
     rec = load_recording(rec_a)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+    with collect_warnings():
         steps = detect_steps(rec, {})
     between = ((steps["t_s"] > 5.0) & (steps["t_s"] <= 50.0)).to_numpy()  # the walk between the first and last point
     walked = float(np.hypot(*(passings[["e_m", "n_m"]].iloc[-1] - passings[["e_m", "n_m"]].iloc[0])))

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import warnings
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -11,10 +9,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from conftest import real_dataset
+from conftest import real_dataset, warns
 from pdr.cli.main import main
 from pdr.constants import GRAVITY_MPS2
-from pdr.errors import InputError
+from pdr.errors import InputError, collect_warnings
 from pdr.io.recording import Recording, save_recording
 from pdr.pipelines.steps import STEPS_COLUMNS, detect_steps, make_detector
 from pdr.sim import simulate
@@ -238,7 +236,7 @@ def test_slope_from_barometer():
 
 def test_pipeline_columns_and_no_walking():
     imu, _ = walk_imu(walk_s=0.0, rest_before_s=20.0, rest_after_s=0.0)
-    with pytest.warns(UserWarning, match="no walking"):
+    with warns(match="no walking"):
         table = detect_steps(rec_of(imu), {})
     assert list(table.columns) == STEPS_COLUMNS and len(table) == 0
 
@@ -246,13 +244,13 @@ def test_pipeline_columns_and_no_walking():
 def test_pipeline_gap_of_minutes_and_low_rate():
     a, ta = walk_imu(walk_s=15, rest_after_s=0.0, seed=1)
     b, tb = walk_imu(walk_s=15, rest_before_s=0.0, seed=2, t0_s=a.t_s.iloc[-1] + 180.0)
-    with pytest.warns(UserWarning, match="gap"):
+    with warns(match="gap"):
         table = detect_steps(rec_of(pd.concat([a, b], ignore_index=True)), {})
     assert not ((table.t_s > a.t_s.iloc[-1]) & (table.t_s < b.t_s.iloc[0])).any()
     tp, fp, fn = match(table.t_s.to_numpy(), np.concatenate([ta, tb]), 0.15)
     assert fp + fn <= 4
     low, truth = walk_imu(rate_hz=20.0, seed=3)
-    with pytest.warns(UserWarning, match="low"):
+    with warns(match="low"):
         table = detect_steps(rec_of(low), {})
     tp, fp, fn = match(table.t_s.to_numpy(), truth, 0.15)
     assert fp + fn <= 2
@@ -260,8 +258,7 @@ def test_pipeline_gap_of_minutes_and_low_rate():
 
 def test_pipeline_one_step_and_bad_config():
     imu, _ = walk_imu(walk_s=0.6, step_hz=1.8)
-    with warnings.catch_warnings(record=True):
-        warnings.simplefilter("always")
+    with collect_warnings():
         table = detect_steps(rec_of(imu), {})
     assert list(table.columns) == STEPS_COLUMNS and len(table) <= 1
     with pytest.raises(InputError, match="unknown parameter"):
@@ -305,7 +302,6 @@ def _oxford_validation(position: str) -> tuple[pd.DataFrame, int]:
 def test_oxford_count_regression(position):
     """Real phone walks (Salvi et al. 2018 data): count within 2% (measured: hand +0.3%, back pocket -0.3%)."""
     imu, n_true = _oxford_validation(position)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+    with collect_warnings():
         n = len(WaveletStepDetection().detect(imu).steps_)
     assert abs(n - n_true) <= 0.02 * n_true, (n, n_true)

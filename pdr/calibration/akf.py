@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import warnings
 from collections import deque
 
 import numpy as np
@@ -10,7 +9,7 @@ import pandas as pd
 
 from pdr.base import Algorithm
 from pdr.calibration.segments import distance_segments, gnss_segments
-from pdr.errors import InputError
+from pdr.errors import InputError, collect_warnings, warn
 from pdr.fusion._linear import bounded_map
 from pdr.step_length.models import StepLengthModel
 
@@ -147,8 +146,7 @@ class AdaptiveKalmanCalibration(Algorithm):
         self.gnss_noise_scale_ = 1.0
         self._set_noise(model_segs)
         if self.adapt_gnss_noise and from_gnss.sum() > len(model.theta_names) + 2:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
+            with collect_warnings():
                 first, _ = self._update_model(model, design[used], model_segs[used])
             g = from_gnss
             resid = model_segs.loc[g, "measured_step_m"].to_numpy() - design[g] @ first.theta
@@ -264,8 +262,8 @@ class AdaptiveKalmanCalibration(Algorithm):
         identified: ``"all"`` (several walking frequencies), ``"level"`` (one: the slope stays near its prior),
         ``"none"``."""
         if len(segs) == 0:
-            warnings.warn("calibration: no distance segment passed the gates (usable fixes, walking, straight); "
-                          "the model is unchanged", stacklevel=3)
+            warn("calibration: no distance segment passed the gates (usable fixes, walking, straight); "
+                 "the model is unchanged")
             return model.with_theta(model.theta, model.covariance_matrix), "none"
         theta0 = model.theta
         p = len(theta0)
@@ -277,8 +275,8 @@ class AdaptiveKalmanCalibration(Algorithm):
         several = p > 1 and np.isfinite(freq).sum() > 1 and float(np.nanstd(freq)) >= self.min_freq_spread_hz
         cols = [i for i in range(p) if prior[i, i] > 0]  # a parameter with zero prior variance is known exactly
         if not cols:
-            warnings.warn("calibration: every parameter has zero prior variance in the model's covariance; "
-                          "the model is unchanged", stacklevel=3)
+            warn("calibration: every parameter has zero prior variance in the model's covariance; "
+                 "the model is unchanged")
             return model.with_theta(theta0, prior), "none"
         fixed = [i for i in range(p) if i not in cols]
         xf = x[:, cols]
@@ -292,8 +290,8 @@ class AdaptiveKalmanCalibration(Algorithm):
         free_sol, _ = bounded_map(info, rhs)
         for j in bounded:
             if free_sol[j] < 0:
-                warnings.warn(f"calibration: the distances ask for {model.theta_names[cols[j]]} = {free_sol[j]:.3g} "
-                              "(step length falling as the cadence rises); held at 0", stacklevel=3)
+                warn(f"calibration: the distances ask for {model.theta_names[cols[j]]} = {free_sol[j]:.3g} "
+                     "(step length falling as the cadence rises); held at 0")
         theta = theta0.copy()
         theta[cols] = sol
         cov = prior.copy()

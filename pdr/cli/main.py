@@ -7,13 +7,14 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import sys
 import textwrap
 import warnings
 from pathlib import Path
 
 from pdr import __version__
-from pdr.errors import InputError
+from pdr.errors import LOGGER_NAME, InputError, warn
 
 HELP_WIDTH = 100  # characters per line of the --help texts
 IMPORT_FORMATS = ("oxford", "mobgap", "humolire", "gaitmap", "xio", "sensorlogger", "phyphox", "gpx", "openshoe")
@@ -35,8 +36,8 @@ def _cmd_validate(args: argparse.Namespace) -> int:
 
     rec = check_recording(args.rec)
     if rec.sample_rate_hz < min_step_rate_hz():
-        warnings.warn(f"{rec.id}: sampling rate {rec.sample_rate_hz:.1f} Hz is below twice the highest cadence "
-                      f"({min_step_rate_hz():g} Hz): no step can be found; pdr run follows the GNSS alone", stacklevel=2)
+        warn(f"{rec.id}: sampling rate {rec.sample_rate_hz:.1f} Hz is below twice the highest cadence "
+             f"({min_step_rate_hz():g} Hz): no step can be found; pdr run follows the GNSS alone")
     parts = [f"{len(rec.imu)} IMU samples at {rec.sample_rate_hz:.1f} Hz", f"placement {rec.placement}"]
     parts += [f"imu_{k}" for k in rec.extra_imus]
     if rec.gnss is not None:
@@ -368,13 +369,25 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _report_warning(message, category, filename, lineno, file=None, line=None) -> None:
-    """The CLI's one reporter of the library's warnings: each a ``warning:`` line on stderr."""
+    """The CLI's reporter of the Python warnings of the libraries underneath: each a ``warning:`` line on stderr."""
     print(f"warning: {' '.join(str(message).split())}", file=sys.stderr)
+
+
+class _WarningLines(logging.Handler):
+    """The CLI's reporter of the library's warnings (the ``pdr`` logger): each a ``warning:`` line on stderr."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        print(f"warning: {record.getMessage()}", file=sys.stderr)
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    logger = logging.getLogger(LOGGER_NAME)
+    reporter, saved = _WarningLines(logging.WARNING), (logger.propagate, logger.level)
+    logger.addHandler(reporter)
+    logger.propagate = False  # the CLI's lines only, not also the application's root handlers
+    logger.setLevel(logging.WARNING)
     try:
         with warnings.catch_warnings():  # every warning of the command to stderr, none left to the caller's filters
             warnings.simplefilter("always")
@@ -393,6 +406,10 @@ def main(argv: list[str] | None = None) -> int:
             raise
         print(f"error: internal failure {type(exc).__name__}: {' '.join(str(exc).split())[:300]} (rerun with --debug)", file=sys.stderr)
         return 1
+    finally:
+        logger.removeHandler(reporter)
+        logger.propagate, level = saved
+        logger.setLevel(level)
 
 
 def entry_point() -> None:

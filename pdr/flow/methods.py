@@ -13,7 +13,6 @@ Conventions: a shift is the displacement of the image content from frame k to fr
 
 from __future__ import annotations
 
-import warnings
 from typing import Sequence
 
 import cv2
@@ -21,7 +20,7 @@ import numpy as np
 import pandas as pd
 
 from pdr.base import Algorithm
-from pdr.errors import InputError
+from pdr.errors import InputError, warn
 
 FLOW_COLUMNS = ["t_s", "dt_s", "flow_x_pxps", "flow_y_pxps", "quality"]
 
@@ -84,7 +83,7 @@ class _FrameFlow(Algorithm):
         """
         arr, t = _as_frames(frames, t_s)
         if len(arr) < 2:
-            warnings.warn(f"{type(self).__name__}: fewer than 2 frames ({len(arr)}), no flow measured", stacklevel=2)
+            warn(f"{type(self).__name__}: fewer than 2 frames ({len(arr)}), no flow measured")
             self.flow_ = _empty_flow()
             self.shift_px_ = np.zeros((0, 2))
             return self

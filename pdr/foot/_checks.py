@@ -2,12 +2,10 @@
 
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
 import pandas as pd
 
-from pdr.errors import InputError
+from pdr.errors import InputError, warn
 from pdr.io.recording import ACC_COLUMNS, GYR_COLUMNS, check_time
 
 MIN_SAMPLES = 20
@@ -50,9 +48,6 @@ def check_pair(left: pd.DataFrame, right: pd.DataFrame, *, max_offset_s: float =
             f"{tl[0]:.3f}-{tl[-1]:.3f} s ({len(tl)} samples) and right {tr[0]:.3f}-{tr[-1]:.3f} s ({len(tr)} samples)"
         )
     if abs(tl[0] - tr[0]) > max_offset_s or abs(tl[-1] - tr[-1]) > max_offset_s:
-        warnings.warn(
-            f"left/right foot IMUs start or end more than {max_offset_s:g} s apart (left {tl[0]:.3f}-{tl[-1]:.3f} s, "
-            f"right {tr[0]:.3f}-{tr[-1]:.3f} s); only the overlap {max(tl[0], tr[0]):.3f}-{min(tl[-1], tr[-1]):.3f} s "
-            f"is combined by the double-feet calibration",
-            stacklevel=3,
-        )
+        warn(f"left/right foot IMUs start or end more than {max_offset_s:g} s apart (left {tl[0]:.3f}-{tl[-1]:.3f} s, "
+   f"right {tr[0]:.3f}-{tr[-1]:.3f} s); only the overlap {max(tl[0], tr[0]):.3f}-{min(tl[-1], tr[-1]):.3f} s "
+   f"is combined by the double-feet calibration")

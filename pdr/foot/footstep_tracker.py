@@ -3,14 +3,12 @@ toe-in / toe-out correction (eq. 1) and double integration with zero velocity at
 
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
 import pandas as pd
 
 from pdr.base import Algorithm
 from pdr.constants import GRAVITY_MPS2
-from pdr.errors import InputError
+from pdr.errors import InputError, warn
 from pdr.foot._checks import foot_imu_arrays
 from pdr.foot._rotations import align_to_gravity, cumulative_rotations
 from pdr.foot.frame import estimate_foot_frame
@@ -124,7 +122,7 @@ class FootStepTrackerStride(Algorithm):
         self.foot_frame_ = np.eye(3)
         self.toe_angle_rad_ = float("nan")
         if len(st) < 2:
-            warnings.warn(f"{self.foot} foot IMU: {len(st)} stance phase(s), no stride to measure", stacklevel=2)
+            warn(f"{self.foot} foot IMU: {len(st)} stance phase(s), no stride to measure")
             return self
         i_mid = st["i_mid"].to_numpy()
         R_fs = estimate_foot_frame(acc, gyr, t, self.stance_.stance_, i_mid)

@@ -2,13 +2,12 @@
 
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
 import pandas as pd
 from scipy.ndimage import uniform_filter1d
 
 from pdr.base import Algorithm
+from pdr.errors import warn
 from pdr.foot._checks import MIN_SAMPLES, foot_imu_arrays
 
 STANCE_COLUMNS = ["t_start_s", "t_end_s", "t_mid_s", "i_start", "i_end", "i_mid"]
@@ -103,8 +102,8 @@ class ZeroVelocityDetection(Algorithm):
         self.window_samples_ = 0
         self.stances_ = pd.DataFrame({c: pd.Series(dtype=float if c.startswith("t_") else int) for c in STANCE_COLUMNS})
         if n < MIN_SAMPLES:
-            warnings.warn(f"foot IMU: {n} samples are too few for zero-velocity detection (need {MIN_SAMPLES}); "
-                          "no stance found", stacklevel=2)
+            warn(f"foot IMU: {n} samples are too few for zero-velocity detection (need {MIN_SAMPLES}); "
+                 "no stance found")
             return self
         rate = 1.0 / float(np.median(np.diff(t)))
         w = max(3, int(round(self.window_s * rate)))
@@ -129,9 +128,8 @@ class ZeroVelocityDetection(Algorithm):
         starts, ends = _runs(mask)
         self.stance_, self.statistic_, self.window_samples_ = mask, stat, w
         if len(starts) == 0:
-            warnings.warn(
-                f"foot IMU: no stance (zero-velocity) phase in {t[-1] - t[0]:.1f} s: the foot never rests "
-                f"(running, or the sensor is not on a foot); no strides", stacklevel=2)
+            warn(f"foot IMU: no stance (zero-velocity) phase in {t[-1] - t[0]:.1f} s: the foot never rests "
+       f"(running, or the sensor is not on a foot); no strides")
             return self
         mid = (starts + ends - 1) // 2
         self.stances_ = pd.DataFrame({
@@ -140,8 +138,8 @@ class ZeroVelocityDetection(Algorithm):
         })
         motion = float(np.mean(~mask))
         if len(starts) < 2 and motion > 0.5:
-            warnings.warn(f"foot IMU: only {len(starts)} stance phase(s) while the foot moves {motion:.0%} of the "
-                          "time: the foot hardly ever rests (running?); strides need two stances", stacklevel=2)
+            warn(f"foot IMU: only {len(starts)} stance phase(s) while the foot moves {motion:.0%} of the "
+                 "time: the foot hardly ever rests (running?); strides need two stances")
         return self
 
     def _clean(self, mask: np.ndarray, t: np.ndarray) -> np.ndarray:

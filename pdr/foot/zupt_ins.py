@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import math
-import warnings
 
 import numpy as np
 import pandas as pd
 
 from pdr.base import Algorithm
 from pdr.constants import GRAVITY_MPS2
+from pdr.errors import warn
 from pdr.foot._checks import foot_imu_arrays
 from pdr.foot._rotations import align_to_gravity, cumulative_rotations
 from pdr.foot.footstep_tracker import empty_strides
@@ -148,7 +148,7 @@ class ZuptInsStride(Algorithm):
         self.gravity_mps2_ = GRAVITY_MPS2
         self.n_updates_ = 0
         if len(st) < 1:
-            warnings.warn(f"{self.foot} foot IMU: no stance phase, the foot INS cannot start", stacklevel=2)
+            warn(f"{self.foot} foot IMU: no stance phase, the foot INS cannot start")
             return self
         i0, i1 = int(st["i_start"].iloc[0]), int(st["i_end"].iloc[0])
         if self.gyr_bias_min_rest_s > 0 and t[i1 - 1] - t[i0] >= self.gyr_bias_min_rest_s:

@@ -6,14 +6,13 @@ measurements and the same GNSS association, and bad input gives the same one-lin
 
 from __future__ import annotations
 
-import warnings
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 import pandas as pd
 
-from pdr.errors import InputError
+from pdr.errors import InputError, warn
 
 TRAJECTORY_COLUMNS = ["t_s", "e_m", "n_m", "heading_rad", "e_std_m", "n_std_m"]
 STEP_COLUMNS = ["t_s", "step_length_m", "step_length_std_m"]
@@ -100,7 +99,7 @@ def prepare(steps: pd.DataFrame, gnss: pd.DataFrame | None, strides: pd.DataFram
     if "heading_change_rad" not in steps.columns and "heading_rad" not in steps.columns:
         raise InputError("steps: expected a heading_change_rad or heading_rad column, found neither")
     if len(steps) == 0:
-        warnings.warn("fusion: the steps table is empty; the trajectory is empty", stacklevel=3)
+        warn("fusion: the steps table is empty; the trajectory is empty")
         return None
     t = _floats(steps, "t_s", "steps")
     if not np.isfinite(t).all():
@@ -205,14 +204,14 @@ def _add_gnss(problem: Problem, gnss: pd.DataFrame, default_h_acc_m: float, tole
         if differ.any():
             i = int(a[np.argmax(differ)])
             raise InputError(f"gnss: expected one fix per time, found two different fixes at t_s = {float(t[i])!r}")
-        warnings.warn(f"gnss: {len(b)} duplicated fix row(s) ignored", stacklevel=4)
+        warn(f"gnss: {len(b)} duplicated fix row(s) ignored")
         valid[b] = False
     tau = problem.epoch_t_s
     early = valid & (t < tau[0] - tolerance_s)
     late = valid & (t > tau[-1] + tolerance_s)
     if (early | late).any():
-        warnings.warn(f"gnss: {int(early.sum())} fix(es) before the first step and {int(late.sum())} after the last one "
-                      f"(more than {tolerance_s} s) are not used", stacklevel=4)
+        warn(f"gnss: {int(early.sum())} fix(es) before the first step and {int(late.sum())} after the last one "
+             f"(more than {tolerance_s} s) are not used")
         valid &= ~(early | late)
     idx = np.flatnonzero(valid)
     tc = np.clip(t[idx], tau[0], tau[-1])

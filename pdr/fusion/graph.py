@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import threading
 import time
-import warnings
 import gtsam
 import numpy as np
 import pandas as pd
@@ -12,7 +11,7 @@ import scipy.sparse
 import scipy.sparse.linalg
 
 from pdr.base import Algorithm
-from pdr.errors import InputError
+from pdr.errors import InputError, warn
 from pdr.fusion import factors
 from pdr.fusion._inputs import BOUT_START_HEADING_STD_RAD, Problem, empty_trajectory, prepare, wrap_rad
 from pdr.fusion._linear import (
@@ -553,9 +552,8 @@ class FactorGraphFusion(Algorithm):
                       "stride scales": i_scale, "step scale": slice(i_step_scale, i_step_scale + 1)}
             worst = max(blocks, key=lambda b: np.max(np.abs(f[blocks[b]]), initial=0.0))
             what = "the GNSS gate still changing" if not same_gate else f"largest in the {worst}"
-            warnings.warn(f"graph fusion: the calibration did not converge in {alternation} alternations (last change "
-                          f"{last_change_m:.3g} m > {self.alternation_tol_m:g} m, {what}); the step model given is kept",
-                          stacklevel=2)
+            warn(f"graph fusion: the calibration did not converge in {alternation} alternations (last change "
+                 f"{last_change_m:.3g} m > {self.alternation_tol_m:g} m, {what}); the step model given is kept")
         theta = params[:3]
         bias = SmoothSeries(bias.t0_s, bias.knot_s, params[i_bias])
         t_marg = time.perf_counter()
@@ -769,9 +767,9 @@ class FactorGraphFusion(Algorithm):
             marginals = with_deep_stack(gtsam.Marginals, graph, values)
         except RuntimeError as exc:
             reason = " ".join(str(exc).strip().split("\n\n")[0].split()) or type(exc).__name__
-            warnings.warn(f"fusion: gtsam marginal covariances unavailable ({reason}); e_std_m/n_std_m propagated "
-                          "along the step chain from the start pose's prior instead (magnetometer, stride and GNSS "
-                          "factors ignored: upper bounds)", stacklevel=3)
+            warn(f"fusion: gtsam marginal covariances unavailable ({reason}); e_std_m/n_std_m propagated "
+                 "along the step chain from the start pose's prior instead (magnetometer, stride and GNSS "
+                 "factors ignored: upper bounds)")
             return chain_position_std(graph, poses)
         out = np.empty((len(poses), 2))
         for i, p in enumerate(poses):

@@ -25,13 +25,12 @@ x = image right (u), y = image down (v), z = optical axis.
 from __future__ import annotations
 
 import dataclasses
-import warnings
 from typing import Any
 
 import numpy as np
 import pandas as pd
 
-from pdr.errors import InputError
+from pdr.errors import InputError, warn
 from pdr.gait.fourier import DEFAULT_ORDER, fourier_coefficients, fourier_derivative, fourier_design_matrix
 from pdr.io.recording import numeric_frame
 
@@ -713,7 +712,7 @@ class WearableCameraGaitEstimation:
         points = _numeric(points, ["e_m", "n_m", "u_m"], "ground points", also=["point_id"])
         t = frames["t_s"].to_numpy(float)
         if len(t) == 0:
-            warnings.warn("thigh camera: no frames; empty estimate", stacklevel=2)
+            warn("thigh camera: no frames; empty estimate")
             self._empty()
             return self
         if not np.all(np.isfinite(t)) or not np.all(np.diff(t) > 0):
@@ -829,8 +828,8 @@ class WearableCameraGaitEstimation:
         self.n_predicted_only_ = n_pred_only
         self.n_relocalised_ = n_relocalised
         if n_pred_only:
-            warnings.warn(f"thigh camera: {n_pred_only} of {len(t)} frames had fewer than {MIN_POINTS} known points "
-                          f"in view; they were predicted only, not updated", stacklevel=2)
+            warn(f"thigh camera: {n_pred_only} of {len(t)} frames had fewer than {MIN_POINTS} known points "
+                 f"in view; they were predicted only, not updated")
         names = np.array(tp.forms_ + [""], dtype=object)
         self.states_ = pd.DataFrame({"t_s": t, **{k: out_state[:, j] for j, k in enumerate(STATE)},
                                      "form": names[out_form], "n_points": out_n, "n_inliers": out_in,

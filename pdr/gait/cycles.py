@@ -34,13 +34,11 @@ extra contact) and are dropped with a warning, as are cycles over a gap of the I
 
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
 import pandas as pd
 
 from pdr.constants import GRAVITY_MPS2
-from pdr.errors import InputError
+from pdr.errors import InputError, warn
 from pdr.foot import ZeroVelocityDetection, estimate_foot_frame
 from pdr.foot.frame import swing_displacements
 from pdr.gait.fourier import DEFAULT_ORDER, coefficient_names, fourier_coefficients, n_coefficients
@@ -91,8 +89,8 @@ def _duration_ok(t0: np.ndarray, t1: np.ndarray, what: str) -> np.ndarray:
     ok = (dur >= MIN_CYCLE_S) & (dur <= MAX_CYCLE_S)
     if (~ok).any():
         short, long_ = int((dur < MIN_CYCLE_S).sum()), int((dur > MAX_CYCLE_S).sum())
-        warnings.warn(f"{what}: {int((~ok).sum())} cycle(s) dropped as not gait ({short} shorter than {MIN_CYCLE_S:g} s, "
-                      f"{long_} longer than {MAX_CYCLE_S:g} s)", stacklevel=3)
+        warn(f"{what}: {int((~ok).sum())} cycle(s) dropped as not gait ({short} shorter than {MIN_CYCLE_S:g} s, "
+             f"{long_} longer than {MAX_CYCLE_S:g} s)")
     return ok
 
 
@@ -117,10 +115,10 @@ def _fit_cycles(t_grid: np.ndarray, signals: np.ndarray, valid: np.ndarray, knot
         out[j] = fourier_coefficients(phase, signals[a:b], order).T
         ok[j] = True
     if n_few:
-        warnings.warn(f"{what}: {n_few} cycle(s) dropped: fewer samples than the {n_coefficients(order)} Fourier "
-                      "coefficients (sampling rate too low)", stacklevel=3)
+        warn(f"{what}: {n_few} cycle(s) dropped: fewer samples than the {n_coefficients(order)} Fourier "
+             "coefficients (sampling rate too low)")
     if n_gap:
-        warnings.warn(f"{what}: {n_gap} cycle(s) dropped: they span a gap of the IMU clock", stacklevel=3)
+        warn(f"{what}: {n_gap} cycle(s) dropped: they span a gap of the IMU clock")
     return out, ok
 
 
@@ -214,7 +212,7 @@ def imu_cycles(u: UniformImu, attitude: Attitude, steps: pd.DataFrame, *, order:
         i0 += list(idx[:-2:2]) if len(idx) >= 3 else []
     i0 = np.asarray(i0, int)
     if len(i0) == 0:
-        warnings.warn(f"{what}: no gait cycle (fewer than three steps in every bout)", stacklevel=2)
+        warn(f"{what}: no gait cycle (fewer than three steps in every bout)")
         return empty_cycles(layout)
     t0, t1 = t_step[i0], t_step[i0 + 2]
     keep = _duration_ok(t0, t1, what)
@@ -233,7 +231,7 @@ def imu_cycles(u: UniformImu, attitude: Attitude, steps: pd.DataFrame, *, order:
     coef, ok = _fit_cycles(u.t_s, sig, u.valid, knots, order, what)
     i0, t0, t1, coef = i0[ok], t0[ok], t1[ok], coef[ok]
     if len(i0) == 0:
-        warnings.warn(f"{what}: no gait cycle left", stacklevel=2)
+        warn(f"{what}: no gait cycle left")
         return empty_cycles(layout)
     if order >= 2:
         coef = _forward_convention(coef)
@@ -278,7 +276,7 @@ def foot_cycles(imu: pd.DataFrame, foot: str, *, order: int = DEFAULT_ORDER,
     stance = stance if stance is not None else ZeroVelocityDetection().detect(imu)
     st = stance.stances_
     if len(st) < 2:
-        warnings.warn(f"{what}: fewer than two stance phases, no gait cycle", stacklevel=2)
+        warn(f"{what}: fewer than two stance phases, no gait cycle")
         return empty_cycles(layout)
     t = imu["t_s"].to_numpy(float)
     acc = imu[["acc_x_mps2", "acc_y_mps2", "acc_z_mps2"]].to_numpy(float)
@@ -289,7 +287,7 @@ def foot_cycles(imu: pd.DataFrame, foot: str, *, order: int = DEFAULT_ORDER,
     keep = _duration_ok(t0, t1, what)
     idx = np.flatnonzero(keep)
     if len(idx) == 0:
-        warnings.warn(f"{what}: no gait cycle left", stacklevel=2)
+        warn(f"{what}: no gait cycle left")
         return empty_cycles(layout)
     a_f = acc @ R_fs.T
     w_f = gyr @ R_fs.T

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import json
 import re
-import warnings
 from pathlib import Path
 from typing import Any
 
@@ -19,7 +18,7 @@ from scipy.cluster.vq import kmeans2
 
 from pdr.base import Algorithm
 from pdr.constants import FLIGHT_MAX_SPECIFIC_FORCE_G, GRAVITY_MPS2
-from pdr.errors import InputError
+from pdr.errors import InputError, collect_warnings
 from pdr.gait.fourier import DEFAULT_ORDER
 from pdr.io.tomlio import read_json
 
@@ -345,8 +344,7 @@ class FourierGaitForms(Algorithm):
         best = None
         rng = np.random.default_rng(self.seed)
         for _ in range(self.n_init):
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")  # an empty cluster in one run is handled by keeping the best run
+            with collect_warnings():
                 cent, lab = kmeans2(g, self.n_forms, minit="++", seed=rng)
             if len(np.unique(lab)) < self.n_forms:
                 continue

@@ -38,14 +38,12 @@ empty, and without ``[subject] mass_kg`` the powers are (a warning once each).
 
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
 import pandas as pd
 from scipy.signal import butter, sosfiltfilt
 
 from pdr.constants import GRAVITY_MPS2
-from pdr.errors import InputError
+from pdr.errors import InputError, warn
 from pdr.signals.resample import UniformImu, moving_average
 
 BOUT_COLUMNS = ("bout_id", "t_start_s", "t_end_s", "n_steps", "distance_m", "speed_mps", "cadence_spm", "step_length_m",
@@ -318,18 +316,18 @@ def walking_bouts(steps: pd.DataFrame, *, placement: str, imu: UniformImu | None
         motion = gnss_motion(gnss)
     if source:
         if mass_kg is None:
-            warnings.warn(f"{what}: no [subject] mass_kg in meta.toml: the powers of bouts.csv are empty", stacklevel=2)
+            warn(f"{what}: no [subject] mass_kg in meta.toml: the powers of bouts.csv are empty")
         energies = step_energies(*motion, t0, t1, mass_kg)
     else:
         if len(k):
             gnss_part = "" if gnss is None else f"; {why}: not used for the mechanics"
-            warnings.warn(f"{what}: placement {placement!r} does not move with the trunk{gnss_part}: the mechanics "
-                          f"columns of bouts.csv are empty", stacklevel=2)
+            warn(f"{what}: placement {placement!r} does not move with the trunk{gnss_part}: the mechanics "
+                 f"columns of bouts.csv are empty")
         energies = pd.DataFrame(np.nan, index=range(len(k)), columns=list(STEP_COLUMNS[4:]))
     step_mech = pd.concat([step_mech, energies.set_index(step_mech.index)], axis=1)
     bouts = bout_table(steps, step_mech)
     bouts["mechanics_source"] = source
     one = int((bouts["n_steps"] == 1).sum())
     if one:
-        warnings.warn(f"{what}: {one} bout(s) of one step: no speed, cadence or mechanics for them", stacklevel=2)
+        warn(f"{what}: {one} bout(s) of one step: no speed, cadence or mechanics for them")
     return bouts, step_mech[list(STEP_COLUMNS)]

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
 import pandas as pd
 from scipy import signal
@@ -11,7 +9,7 @@ from scipy.ndimage import minimum_filter1d
 
 from pdr.base import Algorithm
 from pdr.constants import FLIGHT_MAX_SPECIFIC_FORCE_G, GRAVITY_MPS2, WALK_MIN_SPECIFIC_FORCE_G
-from pdr.errors import InputError
+from pdr.errors import InputError, warn
 from pdr.signals.attitude import Attitude, earth_acceleration, rotate, yaw_increments
 from pdr.signals.resample import UniformImu
 
@@ -199,8 +197,8 @@ class AttitudeStepHeading(Algorithm):
         self.gait_sign_ = np.ones(n)
         if not attitude.has_gyro:
             if n:
-                warnings.warn("heading: no gyroscope; heading changes are unobservable (0 with a std of "
-                              f"{self.no_gyro_std_rad:.2f} rad per step)", stacklevel=2)
+                warn("heading: no gyroscope; heading changes are unobservable (0 with a std of "
+                     f"{self.no_gyro_std_rad:.2f} rad per step)")
             self.heading_rad_ = np.zeros(n)
             self.heading_change_rad_ = np.zeros(n)
             self.heading_change_std_rad_ = np.full(n, float(self.no_gyro_std_rad))
@@ -247,7 +245,7 @@ class AttitudeStepHeading(Algorithm):
             w = np.where(vote[idx], self.direction_quality_[idx], 0.0)
             offset[idx] = circular_smooth(raw_offset[idx], w, self.offset_window_steps // 2)
         if np.isnan(offset).all():
-            warnings.warn("heading: no step gave a walking direction; device yaw used as heading", stacklevel=2)
+            warn("heading: no step gave a walking direction; device yaw used as heading")
             offset[:] = 0.0
         else:  # bouts without a usable direction take the nearest known offset
             known = np.flatnonzero(np.isfinite(offset))

@@ -26,7 +26,6 @@ import os
 import signal
 import sys
 import time
-import warnings
 from collections import deque
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
@@ -35,7 +34,7 @@ from typing import Any, Iterable, Iterator
 
 import pandas as pd
 
-from pdr.errors import InputError
+from pdr.errors import InputError, collect_warnings
 from pdr.io.importers._common import safe_id
 from pdr.io.atomic import write_csv
 from pdr.io.tomlio import read_toml
@@ -97,8 +96,7 @@ def run_one(rec: Path, out_dir: Path, run_kwargs: dict[str, Any], given: str | N
     _one_thread()
     row: dict[str, Any] = {"recording_path": given if given is not None else str(rec), "status": "ok", "error": ""}
     try:
-        with warnings.catch_warnings(), _pandas_one_thread():
-            warnings.simplefilter("ignore")
+        with collect_warnings(), _pandas_one_thread():
             summary = run_recording(rec, out_dir, force=True, **run_kwargs)
         row.update(distance_m=summary["distance_m"], n_steps=summary["n_steps"], duration_s=summary["duration_s"])
     except Exception as exc:  # the batch goes on; the row says why this recording failed

@@ -13,13 +13,12 @@ Configuration section ``[foot]``::
 
 from __future__ import annotations
 
-import warnings
 from typing import Any
 
 import numpy as np
 import pandas as pd
 
-from pdr.errors import InputError, check_keys
+from pdr.errors import InputError, check_keys, warn
 from pdr.foot import DoubleFeetCalibration, FootStepTrackerStride, ZeroVelocityDetection, ZuptInsStride
 from pdr.foot._checks import check_pair, foot_imu_arrays
 from pdr.foot.footstep_tracker import empty_strides
@@ -54,11 +53,11 @@ def _saturation(imu: pd.DataFrame, foot: str) -> np.ndarray:
     gyr_sat = clipped_samples(gyr, rate, min_abs=GYR_SATURATION_MIN_RADPS)
     acc_sat = clipped_samples(acc, rate, min_abs=ACC_SATURATION_MIN_MPS2)
     if gyr_sat.any():
-        warnings.warn(f"{foot} foot IMU: the gyroscope is saturated (flat at {np.abs(gyr).max():.2f} rad/s) in "
-                      f"{int(gyr_sat.sum())} samples; strides across them are dropped", stacklevel=3)
+        warn(f"{foot} foot IMU: the gyroscope is saturated (flat at {np.abs(gyr).max():.2f} rad/s) in "
+             f"{int(gyr_sat.sum())} samples; strides across them are dropped")
     if acc_sat.any():
-        warnings.warn(f"{foot} foot IMU: the accelerometer is saturated (flat at {np.abs(acc).max():.1f} m/s²) in "
-                      f"{int(acc_sat.sum())} samples; strides across them are dropped", stacklevel=3)
+        warn(f"{foot} foot IMU: the accelerometer is saturated (flat at {np.abs(acc).max():.1f} m/s²) in "
+             f"{int(acc_sat.sum())} samples; strides across them are dropped")
     return gyr_sat | acc_sat
 
 
@@ -82,7 +81,7 @@ def _drop_implausible(strides: pd.DataFrame, foot: str) -> pd.DataFrame:
     reason = implausible(strides)
     for i in np.flatnonzero(reason != ""):
         t0, t1 = strides["t_start_s"].iloc[i], strides["t_end_s"].iloc[i]
-        warnings.warn(f"{foot} foot IMU: the stride {t0:.2f}-{t1:.2f} s is dropped: {reason[i]}", stacklevel=3)
+        warn(f"{foot} foot IMU: the stride {t0:.2f}-{t1:.2f} s is dropped: {reason[i]}")
     return strides[reason == ""]
 
 
@@ -111,8 +110,8 @@ def foot_strides(rec: Recording, config: dict) -> pd.DataFrame | None:
         t = imu["t_s"].to_numpy(float)
         rate = 1.0 / float(np.median(np.diff(t))) if len(t) > 1 else 0.0
         if rate < MIN_RATE_HZ:
-            warnings.warn(f"{foot} foot IMU: sampled at {rate:.1f} Hz, too slow to find the stances (need at least "
-                          f"{MIN_RATE_HZ:g} Hz); no strides from this foot", stacklevel=2)
+            warn(f"{foot} foot IMU: sampled at {rate:.1f} Hz, too slow to find the stances (need at least "
+                 f"{MIN_RATE_HZ:g} Hz); no strides from this foot")
             continue
         saturated = _saturation(imu, foot)
         stance = ZeroVelocityDetection.from_config(section.get("zero_velocity")).detect(imu)
@@ -138,7 +137,7 @@ def foot_strides(rec: Recording, config: dict) -> pd.DataFrame | None:
         cal = DoubleFeetCalibration.from_config(section.get("double_feet_calibration")).estimate(out)
         out = cal.strides_[out.columns]
     if len(out) == 0:
-        warnings.warn("foot IMU: no stride found (the feet never rest, or fewer than two stances)", stacklevel=2)
+        warn("foot IMU: no stride found (the feet never rest, or fewer than two stances)")
     return out.reset_index(drop=True)
 
 

@@ -13,7 +13,6 @@
 
 from __future__ import annotations
 
-import warnings
 from pathlib import Path
 from typing import Any
 
@@ -21,7 +20,7 @@ import numpy as np
 import pandas as pd
 
 from pdr.config import load_config
-from pdr.errors import InputError, check_keys
+from pdr.errors import InputError, check_keys, collect_warnings, warn
 from pdr.eval.metrics import match_events
 from pdr.gait.cycles import empty_cycles, foot_cycles, foot_layout, imu_cycles, imu_layout
 from pdr.gait.forms import FORMS_COLUMNS, LEG_LENGTH_PER_HEIGHT, FourierGaitForms, load_forms
@@ -68,7 +67,7 @@ def recording_cycles(rec: Recording, config: dict | None = None, *, steps: pd.Da
                 model.estimate(model.prepare(steps, rec), subject=rec.subject)
                 steps = steps.assign(step_length_m=model.step_length_m_)
         if len(steps) < 3:
-            warnings.warn(f"{rec.id}: fewer than three steps, no gait cycle", stacklevel=2)
+            warn(f"{rec.id}: fewer than three steps, no gait cycle")
             cycles = empty_cycles(imu_layout())
         else:
             u = uniform_imu(rec.imu)
@@ -184,8 +183,7 @@ def fit_step_models(recordings: list[Recording], forms: FourierGaitForms, config
     kinds = np.concatenate(kinds_all)
     ok = np.isfinite(lengths) & (lengths > 0)
     models = {}
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+    with collect_warnings():
         models["all"] = model_to_dict(model_from_config(config).fit(steps[ok], lengths[ok]), n_steps=int(ok.sum()))
         for kind in sorted({k for k in kinds if k is not None}):
             sel = ok & (kinds == kind)
@@ -203,7 +201,7 @@ def classify_forms(rec: Path, forms: Path, out: Path, *, config_path=None) -> Pa
     recording = load_recording(Path(rec), with_reference=False)
     cycles = recording_cycles(recording, config)
     if len(cycles) == 0:
-        warnings.warn(f"{recording.id}: no gait cycle; empty forms table", stacklevel=2)
+        warn(f"{recording.id}: no gait cycle; empty forms table")
     table = model.classify(cycles).cycles_forms_[FORMS_COLUMNS]
     write_csv(Path(out), table)
     return Path(out)

@@ -6,8 +6,6 @@ Config sections: ``[flow]`` (CorrelationOpticalFlow parameters; defaults scaled 
 
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
 import pandas as pd
 
@@ -68,7 +66,5 @@ def camera_strides(rec: Recording, config: dict) -> pd.DataFrame | None:
     if "mass_kg" in subject:
         slip_defaults["mass_kg"] = float(subject["mass_kg"])
     est = SlipOpticalFlowStride.from_config({**slip_defaults, **config.get("slip_of", {})})
-    with warnings.catch_warnings():
-        warnings.simplefilter("default")
-        est.estimate(flow["t_s"].to_numpy(), forward_flow(flow), flow["quality"].to_numpy())
+    est.estimate(flow["t_s"].to_numpy(), forward_flow(flow), flow["quality"].to_numpy())
     return est.strides_.reset_index(drop=True)

@@ -13,7 +13,6 @@ from __future__ import annotations
 import copy
 import hashlib
 import time
-import warnings
 from pathlib import Path
 from typing import Any
 
@@ -22,7 +21,7 @@ import pandas as pd
 
 from pdr import __version__
 from pdr.config import load_config
-from pdr.errors import InputError, check_keys
+from pdr.errors import InputError, check_keys, collect_warnings, warn
 from pdr.fusion import EkfFusion, FactorGraphFusion, IncrementalFusion
 from pdr.geo import latlon_to_en
 from pdr.heading import AttitudeStepHeading
@@ -125,9 +124,8 @@ def clipped_lengths(length_m: np.ndarray, rec_id: str) -> np.ndarray:
     walked) whose distance the trajectory keeps; ``steps.csv`` says what a step can be."""
     bad = (length_m < 0) | (length_m > MAX_STEP_M)
     if bad.any():
-        warnings.warn(f"{rec_id}: {int(bad.sum())} fused step length(s) outside [0, {MAX_STEP_M:g}] m (up to "
-                      f"{float(np.max(np.abs(length_m[bad]))):.1f} m: gaps the trajectory keeps) clipped in steps.csv",
-                      stacklevel=3)
+        warn(f"{rec_id}: {int(bad.sum())} fused step length(s) outside [0, {MAX_STEP_M:g}] m (up to "
+             f"{float(np.max(np.abs(length_m[bad]))):.1f} m: gaps the trajectory keeps) clipped in steps.csv")
     return np.clip(length_m, 0.0, MAX_STEP_M)
 
 
@@ -191,8 +189,7 @@ def run_recording(rec: Path, out: Path, *, config_path=None, model_path=None, us
         timings[stage] = now - clock
         clock = now
 
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
+    with collect_warnings() as caught:
         recording = check_recording(rec, with_reference=False)
         config = load_config(config_path)
         settings = gnss_settings(config)
@@ -207,7 +204,7 @@ def run_recording(rec: Path, out: Path, *, config_path=None, model_path=None, us
         steps = detect_steps(recording, config).reset_index(drop=True)
         not_walking = not_walking_intervals(steps, gnss, recording.subject.get("height_m"))
         for iv in not_walking:
-            warnings.warn(interval_message(recording.id, iv), stacklevel=2)
+            warn(interval_message(recording.id, iv))
         steps = drop_not_walking(steps, not_walking)
         lap("steps_s")
 
@@ -253,8 +250,7 @@ def run_recording(rec: Path, out: Path, *, config_path=None, model_path=None, us
                 traj = start_only_trajectory(float(recording.imu["t_s"].iloc[0]))
             else:
                 gnss_used = usable
-                warnings.warn(f"{recording.id}: no steps; the trajectory follows the GNSS alone ({int(usable.sum())} fixes)",
-                              stacklevel=2)
+                warn(f"{recording.id}: no steps; the trajectory follows the GNSS alone ({int(usable.sum())} fixes)")
         solver = {"fusion": method, **fusion.solver_}
         stride_scales = getattr(fusion, "stride_scales_", None) or {}  # per source; the EKF does not use strides
         lap("fusion_s")
@@ -262,7 +258,7 @@ def run_recording(rec: Path, out: Path, *, config_path=None, model_path=None, us
         bouts, bout_steps = recording_bouts(recording, steps, gnss)  # bouts.csv: walking bouts and their mechanics
         lap("bouts_s")
 
-    run_warnings = [" ".join(str(w.message).split()) for w in caught]
+    run_warnings = list(caught)
     rejected = (rejected_gnss(gnss, gnss_suspect, gnss_used, float(traj["t_s"].iloc[0]), float(traj["t_s"].iloc[-1]))
                 if gnss is not None else [])
     warning_list = warning_objects(faults.faults_, rejected, run_warnings)
@@ -338,5 +334,5 @@ def run_recording(rec: Path, out: Path, *, config_path=None, model_path=None, us
         summary["timings_s"] = {**timings, "total_s": sum(timings.values())}
         write_json(tmp / "summary.json", summary)
     for message in [warning_line(w) for w in warning_list if w["kind"] != "general"] + run_warnings:
-        warnings.warn(message, stacklevel=2)
+        warn(message)
     return summary

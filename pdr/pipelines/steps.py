@@ -2,12 +2,9 @@
 
 from __future__ import annotations
 
-import warnings
-
-import numpy as np
 import pandas as pd
 
-from pdr.errors import InputError
+from pdr.errors import InputError, warn
 from pdr.heading import AttitudeStepHeading
 from pdr.io.recording import Recording
 from pdr.pipelines.not_walking import min_step_rate_hz
@@ -55,19 +52,19 @@ def detect_steps(rec: Recording, config: dict) -> pd.DataFrame:
     heading = AttitudeStepHeading.from_config(config.get("heading"))
     u = uniform_imu(rec.imu)
     if u.rate_hz < min_step_rate_hz():
-        warnings.warn(f"{rec.id}: no steps: sampling rate {u.rate_hz:.1f} Hz is below twice the highest cadence "
-                      f"({min_step_rate_hz():g} Hz), so steps can not be found", stacklevel=2)
+        warn(f"{rec.id}: no steps: sampling rate {u.rate_hz:.1f} Hz is below twice the highest cadence "
+             f"({min_step_rate_hz():g} Hz), so steps can not be found")
         return empty_steps_table()
     if u.rate_hz < LOW_RATE_HZ:
-        warnings.warn(f"{rec.id}: sampling rate {u.rate_hz:.1f} Hz is low (< {LOW_RATE_HZ:g} Hz): contact times are "
-                      f"only good to about {1e3 / u.rate_hz:.0f} ms", stacklevel=2)
+        warn(f"{rec.id}: sampling rate {u.rate_hz:.1f} Hz is low (< {LOW_RATE_HZ:g} Hz): contact times are "
+             f"only good to about {1e3 / u.rate_hz:.0f} ms")
     detector.detect(u)
     steps = detector.steps_.sort_values("t_s", kind="stable").reset_index(drop=True)
     if len(steps) == 0:
-        warnings.warn(f"{rec.id}: no walking found, no steps", stacklevel=2)
+        warn(f"{rec.id}: no walking found, no steps")
         return empty_steps_table()
     if len(steps) == 1:
-        warnings.warn(f"{rec.id}: only one step found", stacklevel=2)
+        warn(f"{rec.id}: only one step found")
     feats = step_features(steps, u, acc_norm_signal(u), gnss=rec.gnss)
     att = estimate_attitude(u)
     heading.estimate(u, att, steps)

@@ -3,12 +3,11 @@
 from __future__ import annotations
 
 import dataclasses
-import warnings
 
 import numpy as np
 import pandas as pd
 
-from pdr.errors import InputError
+from pdr.errors import InputError, warn
 from pdr.io.recording import ACC_COLUMNS, GYR_COLUMNS, MAG_COLUMNS, check_time
 
 GAP_FACTOR = 5.0  # an original sample interval longer than this many median intervals is a gap ...
@@ -107,7 +106,6 @@ def uniform_imu(imu: pd.DataFrame, rate_hz: float | None = None) -> UniformImu:
             hi = np.searchsorted(grid, t[g + 1], side="left")
             valid[lo:hi] = False
         longest = float(dt[gaps].max())
-        warnings.warn(f"imu: {len(gaps)} gap(s) in the clock (longest {longest:.2f} s); no steps are detected inside them",
-                      stacklevel=2)
+        warn(f"imu: {len(gaps)} gap(s) in the clock (longest {longest:.2f} s); no steps are detected inside them")
     return UniformImu(t_s=grid, rate_hz=rate, acc_mps2=acc, gyr_radps=gyr, mag_ut=mag,
                       baro_hpa=None if baro is None else baro[:, 0], valid=valid)

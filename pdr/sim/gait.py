@@ -22,7 +22,6 @@ Frames: world = local east-north-up (m). Segment frames: ``pelvis`` and ``foot_*
 from __future__ import annotations
 
 import dataclasses
-import warnings
 from typing import Sequence
 
 import numpy as np
@@ -30,7 +29,7 @@ import pandas as pd
 from scipy.interpolate import CubicSpline
 
 from pdr.constants import GRAVITY_MPS2
-from pdr.errors import InputError
+from pdr.errors import InputError, warn
 from pdr.sim.route import Route
 
 # ------------------------------------------------------------------------------------------------------------------
@@ -278,8 +277,8 @@ def plan_walk(segments: Sequence[tuple[float, float]], user: GaitUser, body: Bod
             lengths.append(float(user.step_length_m(v, body.leg_length_m)) * float(np.clip(1.0 + cv * eps, 0.4, 1.8)))
             vs.append(v)
         if len(times) < 4:
-            warnings.warn(f"walk: the moving segments from {tb:.1f} s to {te:.1f} s are too short for 3 steps; "
-                          f"the person stands instead", stacklevel=3)
+            warn(f"walk: the moving segments from {tb:.1f} s to {te:.1f} s are too short for 3 steps; "
+                 f"the person stands instead")
         else:
             n = len(times) - 1
             lengths[0] *= GAIT_START_FRACTION  # from standing, and back to feet together

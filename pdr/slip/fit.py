@@ -5,14 +5,13 @@ from __future__ import annotations
 import itertools
 import math
 import time
-import warnings
 
 import numpy as np
 import pandas as pd
 from scipy.optimize import minimize
 
 from pdr.base import Algorithm
-from pdr.errors import InputError
+from pdr.errors import InputError, collect_warnings, warn
 from pdr.slip.model import SlipBody, simulate_flow, simulate_step, stride_kinematics
 
 STRIDE_COLUMNS = ["t_start_s", "t_end_s", "foot", "length_m", "length_std_m", "source"]
@@ -262,7 +261,7 @@ class SlipOpticalFlowStride(Algorithm):
         n = len(segs)
         per = max(1, int(self.strides_per_fit))
         if n < 1:
-            warnings.warn("SlipOpticalFlowStride: no complete stride found in the flow; no stride estimated", stacklevel=2)
+            warn("SlipOpticalFlowStride: no complete stride found in the flow; no stride estimated")
             return self
         fnan = np.where(q > 0, f, 0.0)
         ok = q > 0
@@ -282,8 +281,8 @@ class SlipOpticalFlowStride(Algorithm):
                 windows.append((t[m], fnan[m], q[m], s.t_start_s, s.t_end_s - s.t_start_s, fint[m]))
             mean_q = float(np.mean(np.concatenate([w[2] for w in windows]))) if windows else 0.0
             if mean_q < self.min_quality:
-                warnings.warn(f"SlipOpticalFlowStride: flow quality {mean_q:.2f} below {self.min_quality} for the strides "
-                              f"from {win.t_start_s.iloc[0]:.2f} s to {win.t_end_s.iloc[-1]:.2f} s; no stride there", stacklevel=2)
+                warn(f"SlipOpticalFlowStride: flow quality {mean_q:.2f} below {self.min_quality} for the strides "
+                     f"from {win.t_start_s.iloc[0]:.2f} s to {win.t_end_s.iloc[-1]:.2f} s; no stride there")
                 continue
             stance = float(np.mean((win.t_toe_off_s - win.t_start_s) / (win.t_end_s - win.t_start_s)))
             fit = self._fit_window(windows, stance, grid, median_stance)
@@ -443,8 +442,7 @@ def calibrate_slip_body(estimator: SlipOpticalFlowStride, t_s, forward_flow_pxps
     best = None
     for ratio in clearance_grid or (estimator.swing_clearance_ratio,):
         est = SlipOpticalFlowStride(**{**estimator.get_params(), "swing_clearance_ratio": ratio, "length_scale": 1.0})
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
+        with collect_warnings():
             est.estimate(t_s, forward_flow_pxps, quality)
         if est.strides_.empty:
             continue

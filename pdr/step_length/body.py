@@ -24,10 +24,10 @@ Example
 
 from __future__ import annotations
 
-import warnings
 from pathlib import Path
 from typing import Any
 
+from pdr.errors import warn
 from pdr.io.recording import check_subject
 from pdr.step_length.io import load_model, model_from_config
 from pdr.step_length.models import (
@@ -70,8 +70,8 @@ def body_model(subject: dict[str, Any] | None, placement: str) -> tuple[StepLeng
         reason = (f"{placement} sensor: height-and-cadence model, 0.414 x {what} {h:.3g} m at 110 steps/min, "
                   f"proportional to the cadence (pedometer rule; Sekiya & Nagasaki 1998)")
     if not known:
-        warnings.warn(f"step length: nothing known about the person (meta.toml [subject] has no height_m, leg_length_m "
-                      f"or sensor_height_m); using the population model ({reason})", stacklevel=3)
+        warn(f"step length: nothing known about the person (meta.toml [subject] has no height_m, leg_length_m "
+             f"or sensor_height_m); using the population model ({reason})")
     return model, _choice(model, source, reason)
 
 

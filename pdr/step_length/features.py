@@ -18,14 +18,12 @@ Example
 
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
 import pandas as pd
 from scipy.signal import butter, sosfiltfilt
 
 from pdr.constants import GRAVITY_MPS2
-from pdr.errors import InputError
+from pdr.errors import InputError, warn
 from pdr.io.recording import ACC_COLUMNS, Recording, check_time
 
 SIGNAL_FEATURES = ("acc_range_mps2", "acc_abs_mean_mps2", "vertical_excursion_m")
@@ -135,8 +133,7 @@ def step_signal_features(imu: pd.DataFrame, t_s: np.ndarray, bout_id: np.ndarray
         absmean[ok] = (c_abs[i1[ok]] - c_abs[i0[ok]]) / (i1[ok] - i0[ok])
         rng[ok] = [float(np.ptp(av[s:e])) for s, e in zip(i0[ok], i1[ok])]
     if (~ok).any():
-        warnings.warn(f"step features: {int((~ok).sum())} step(s) lie outside the IMU record; their features are NaN",
-                      stacklevel=2)
+        warn(f"step features: {int((~ok).sum())} step(s) lie outside the IMU record; their features are NaN")
     return pd.DataFrame({"acc_range_mps2": rng, "acc_abs_mean_mps2": absmean, "vertical_excursion_m": exc})
 
 

@@ -19,14 +19,13 @@ uncertainty of its parameters (``covariance``, None = parameters taken as exact)
 
 from __future__ import annotations
 
-import warnings
 from typing import Any, ClassVar
 
 import numpy as np
 import pandas as pd
 
 from pdr.base import Algorithm
-from pdr.errors import InputError
+from pdr.errors import InputError, warn
 from pdr.io.recording import Recording
 from pdr.step_length.features import with_signal_features
 
@@ -117,8 +116,8 @@ class StepLengthModel(Algorithm):
                 raise InputError(f"{type(self).__name__}: expected {c} >= 0, found {x[finite].min():.4g}")
             if not finite.all() and len(x):
                 fill = float(np.median(x[finite])) if finite.any() else float(self.typical_features[c])
-                warnings.warn(f"{type(self).__name__}: {int((~finite).sum())} step(s) without a finite {c}; "
-                              f"using {fill:.4g} for them", stacklevel=3)
+                warn(f"{type(self).__name__}: {int((~finite).sum())} step(s) without a finite {c}; "
+                     f"using {fill:.4g} for them")
                 x = np.where(finite, x, fill)
             out[c] = x
         if "step_freq_hz" in out and (out["step_freq_hz"] > MAX_FREQ_HZ).any():
@@ -144,8 +143,8 @@ class StepLengthModel(Algorithm):
             var = var + np.einsum("ij,jk,ik->i", x, cov, x)
         bad = (length < 0) | (length > MAX_STEP_M)
         if bad.any():
-            warnings.warn(f"{type(self).__name__}: {int(bad.sum())} step length(s) outside [0, {MAX_STEP_M:g}] m clipped "
-                          "(features far from the model's range)", stacklevel=2)
+            warn(f"{type(self).__name__}: {int(bad.sum())} step length(s) outside [0, {MAX_STEP_M:g}] m clipped "
+                 "(features far from the model's range)")
             length = np.clip(length, 0.0, MAX_STEP_M)
         self.step_length_m_ = length
         self.step_length_std_m_ = np.sqrt(var)
@@ -167,8 +166,8 @@ class StepLengthModel(Algorithm):
         if len(y) <= p or np.linalg.matrix_rank(_standardised(x)) < p:
             if len(y) < 2:
                 raise InputError(f"{type(self).__name__}.fit: expected at least 2 steps, found {len(y)}")
-            warnings.warn(f"{type(self).__name__}.fit: the features do not separate the {p} parameters "
-                          f"({len(y)} steps); fitting {self.theta_names[0]} only", stacklevel=2)
+            warn(f"{type(self).__name__}.fit: the features do not separate the {p} parameters "
+                 f"({len(y)} steps); fitting {self.theta_names[0]} only")
             cols = [0]
         theta = self.theta
         fixed = [j for j in range(p) if j not in cols]

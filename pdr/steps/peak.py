@@ -2,13 +2,11 @@
 
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
 import pandas as pd
 
 from pdr.base import Algorithm
-from pdr.errors import InputError
+from pdr.errors import InputError, warn
 from pdr.signals.resample import UniformImu, moving_average, runs
 from pdr.steps.wavelet import as_uniform, empty_steps, local_maxima
 
@@ -67,7 +65,7 @@ class PeakStepDetection(Algorithm):
             times.append(u.t_s[a + np.sort(np.asarray(keep, int))])
         t = np.concatenate(times) if times else np.zeros(0)
         if len(t) == 0:
-            warnings.warn("peak steps: no steps found", stacklevel=2)
+            warn("peak steps: no steps found")
             return self
         gap = np.diff(t) > self.max_step_interval_s
         isolated = np.concatenate([[True], gap]) & np.concatenate([gap, [True]])

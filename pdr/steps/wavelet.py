@@ -9,7 +9,7 @@ import pandas as pd
 import pywt
 
 from pdr.base import Algorithm
-from pdr.errors import InputError
+from pdr.errors import InputError, warn
 from pdr.signals.attitude import gravity_direction_lowpass
 from pdr.signals.resample import UniformImu, moving_average, uniform_imu
 from pdr.steps.gait import bouts_from_mask, core_walking, walking_mask
@@ -179,8 +179,8 @@ class WaveletStepDetection(Algorithm):
         self.steps_, self.bouts_ = empty_steps(), empty_bouts()
         min_step_s, max_step_s = 1.0 / self.max_step_freq_hz, 1.0 / self.min_step_freq_hz
         if u.rate_hz < 2.0 * self.max_step_freq_hz:
-            warnings.warn(f"steps: sampling rate {u.rate_hz:.1f} Hz is below twice the highest cadence "
-                          f"({self.max_step_freq_hz} Hz); no steps detected", stacklevel=2)
+            warn(f"steps: sampling rate {u.rate_hz:.1f} Hz is below twice the highest cadence "
+                 f"({self.max_step_freq_hz} Hz); no steps detected")
             return self
         x = DETECTION_SIGNALS[self.signal](u)
         walking, period = walking_mask(x, u.rate_hz, window_s=self.bout_window_s, min_step_s=min_step_s,

@@ -12,7 +12,6 @@ import lzma
 import re
 import stat
 import tempfile
-import warnings
 import zipfile
 import zlib
 from pathlib import Path, PurePosixPath
@@ -21,7 +20,7 @@ from typing import Iterator
 import numpy as np
 import pandas as pd
 
-from pdr.errors import InputError
+from pdr.errors import InputError, warn
 from pdr.io.recording import MAX_DT_SPREAD, Recording, save_recording, validate_gnss, validate_imu
 
 # Zip archives (Sensor Logger, phyphox exports) are untrusted input: limits against zip bombs.
@@ -165,8 +164,8 @@ def increasing_mask(t: np.ndarray, what: str, *, row_offset: int = 0) -> np.ndar
             raise InputError(f"{what}: expected increasing time stamps (a few repeats are repaired), found {n_drop} of "
                              f"{len(t)} samples at or before an earlier time, from data row {first + 1 + row_offset} "
                              "(a clock jump or an unsorted file)")
-        warnings.warn(f"{what}: dropped {n_drop} sample(s) whose time repeats or steps back "
-                      f"(the first at data row {first + 1 + row_offset})", stacklevel=3)
+        warn(f"{what}: dropped {n_drop} sample(s) whose time repeats or steps back "
+             f"(the first at data row {first + 1 + row_offset})")
     return keep
 
 
@@ -322,8 +321,8 @@ def steady_clock(t: np.ndarray, values: np.ndarray, what: str) -> tuple[np.ndarr
         raise InputError(f"{what}: expected a sensor clock, found {len(t)} samples spread over {t[-1] - t[0]:.6g} s "
                          f"(the largest interval {float(dt.max()):.6g} s: a clock jump or a wrong time unit?)")
     grid = uniform_grid(t[0], t[-1], rate)
-    warnings.warn(f"{what}: sample intervals vary wildly (interquartile {q25 * 1e3:.2f} to {q75 * 1e3:.2f} ms); "
-                  f"resampled linearly to a uniform {rate:g} Hz grid", stacklevel=3)
+    warn(f"{what}: sample intervals vary wildly (interquartile {q25 * 1e3:.2f} to {q75 * 1e3:.2f} ms); "
+         f"resampled linearly to a uniform {rate:g} Hz grid")
     return grid, interp_columns(grid, t, values)
 
 

@@ -4,14 +4,13 @@ clock)."""
 
 from __future__ import annotations
 
-import warnings
 from typing import Any
 
 import numpy as np
 import pandas as pd
 
 from pdr.constants import GRAVITY_MPS2
-from pdr.errors import InputError
+from pdr.errors import InputError, warn
 from pdr.io.importers._common import imu_frame, increasing_mask, interp_columns, require_finite, steady_clock
 from pdr.io.recording import ACC_G_MEDIAN_RANGE, ACC_MPS2_MEDIAN_RANGE
 
@@ -104,7 +103,7 @@ def gnss_table(t: np.ndarray, lat: np.ndarray, lon: np.ndarray, alt: np.ndarray 
     h_acc = h_acc[ok] if h_acc is not None else None
     invalid = ~np.isfinite(lat) | ~np.isfinite(lon) | ((lat == 0.0) & (lon == 0.0)) | (np.abs(lat) > 90) | (np.abs(lon) > 180)
     if invalid.any():
-        warnings.warn(f"{what}: {int(invalid.sum())} fix(es) without a valid position kept as NaN", stacklevel=3)
+        warn(f"{what}: {int(invalid.sum())} fix(es) without a valid position kept as NaN")
         lat[invalid] = lon[invalid] = np.nan
     cols: dict[str, np.ndarray] = {"t_s": t, "lat_deg": lat, "lon_deg": lon}
     if alt is not None:

@@ -27,14 +27,13 @@ when the example file names it.
 
 from __future__ import annotations
 
-import warnings
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pandas as pd
 
-from pdr.errors import InputError
+from pdr.errors import InputError, warn
 from pdr.io.importers._common import (
     imu_frame, numeric_array, read_table, require_finite, safe_id, write_recordings,
 )
@@ -120,7 +119,7 @@ def _walk_reference(folder: Path, suffix: str, rate_hz: float, activity: dict[st
         norm = dict(zip(zip(last["foot"], last["s_id"]), np.hypot(last["pos_x"], last["pos_y"])))
         lengths = np.array([norm.get((f, s), np.nan) for f, s in zip(ev["foot"], ev["s_id"])])
     else:
-        warnings.warn(f"{folder.name}: no {pos_path.name}; stride lengths are unknown (NaN)", stacklevel=3)
+        warn(f"{folder.name}: no {pos_path.name}; stride lengths are unknown (NaN)")
     strides = pd.DataFrame({
         "t_start_s": ev["start"] / rate_hz, "t_end_s": ev["end"] / rate_hz, "foot": ev["foot"], "length_m": lengths,
         "ic_s": ev["ic"] / rate_hz, "tc_s": ev["tc"] / rate_hz, "s_id": ev["s_id"].astype(int),
@@ -150,16 +149,15 @@ def _recording(path: Path, rate_hz: float | None) -> Recording:
                          "of order")
     if np.allclose(np.diff(first), 1.0) and np.allclose(first, np.round(first)):  # a sample index
         if rate_hz is None:
-            warnings.warn(f"{path.name}: carries only a sample index and --rate-hz was not given; "
-                          f"using {DEFAULT_RATE_HZ} Hz (the rate of the gaitmap example data)", stacklevel=3)
+            warn(f"{path.name}: carries only a sample index and --rate-hz was not given; "
+                 f"using {DEFAULT_RATE_HZ} Hz (the rate of the gaitmap example data)")
             rate_hz = DEFAULT_RATE_HZ
         t_s = (first - first[0]) / rate_hz
     else:
         t_s = first
         file_rate = 1.0 / float(np.median(np.diff(t_s))) if len(t_s) > 1 else float("nan")
         if rate_hz is not None and abs(file_rate - rate_hz) > 0.01 * rate_hz:
-            warnings.warn(f"{path.name}: its time column gives {file_rate:.1f} Hz; --rate-hz {rate_hz:g} is ignored",
-                          stacklevel=3)
+            warn(f"{path.name}: its time column gives {file_rate:.1f} Hz; --rate-hz {rate_hz:g} is ignored")
         rate_hz = file_rate
     suffix = path.stem[len("imu_"):] if path.stem.startswith("imu_") else path.stem
     reference = _walk_reference(path.parent, suffix, rate_hz, activity)

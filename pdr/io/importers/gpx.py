@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import re
 import shutil
-import warnings
 import xml.etree.ElementTree as ET
 from datetime import datetime, timezone
 from pathlib import Path
@@ -25,7 +24,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from pdr.errors import InputError
+from pdr.errors import InputError, warn
 from pdr.io.atomic import atomic_dir, write_csv, write_text
 from pdr.io.importers._common import increasing_mask, require_file
 from pdr.io.recording import exact_time_column, load_recording, validate_gnss
@@ -95,9 +94,9 @@ def read_gpx(path: Path) -> pd.DataFrame:
     if not rows:
         raise InputError(f"{what}: expected points with a <time>, found {len(points)} point(s) without one")
     if no_time:
-        warnings.warn(f"{what}: skipped {no_time} point(s) without <time>", stacklevel=2)
+        warn(f"{what}: skipped {no_time} point(s) without <time>")
     if no_zone:
-        warnings.warn(f"{what}: times without a zone taken as UTC", stacklevel=2)
+        warn(f"{what}: times without a zone taken as UTC")
     return pd.DataFrame(rows, columns=["unix_s", "lat_deg", "lon_deg", "alt_m"])
 
 
@@ -111,7 +110,7 @@ def import_source(src: Path, dest: Path, *, rate_hz: float | None = None, force:
         t0 = float(start)
     else:
         t0 = float(track["unix_s"].iloc[0])
-        warnings.warn(f"{dest}: meta.toml has no [recording] start_unix_s; the GPX's first point is taken as t_s = 0", stacklevel=2)
+        warn(f"{dest}: meta.toml has no [recording] start_unix_s; the GPX's first point is taken as t_s = 0")
     t_s = np.round(track["unix_s"].to_numpy() - t0, 6)  # GPX times have at most microsecond resolution
     keep = increasing_mask(t_s, src.name)
     gnss = pd.DataFrame({"t_s": t_s, "lat_deg": track["lat_deg"], "lon_deg": track["lon_deg"]})[keep]
@@ -120,8 +119,8 @@ def import_source(src: Path, dest: Path, *, rate_hz: float | None = None, force:
     gnss = validate_gnss(gnss.reset_index(drop=True), f"{src.name} -> gnss.csv")
     imu_t = rec.imu["t_s"].to_numpy()
     if gnss["t_s"].iloc[-1] < imu_t[0] or gnss["t_s"].iloc[0] > imu_t[-1]:
-        warnings.warn(f"{src.name}: the track ({gnss['t_s'].iloc[0]:.1f} to {gnss['t_s'].iloc[-1]:.1f} s) does not overlap "
-                      f"the IMU ({imu_t[0]:.1f} to {imu_t[-1]:.1f} s); check the clocks", stacklevel=2)
+        warn(f"{src.name}: the track ({gnss['t_s'].iloc[0]:.1f} to {gnss['t_s'].iloc[-1]:.1f} s) does not overlap "
+             f"the IMU ({imu_t[0]:.1f} to {imu_t[-1]:.1f} s); check the clocks")
     meta = dict(rec.meta)
     if "geo" not in meta:
         meta["geo"] = {"origin_lat_deg": float(gnss["lat_deg"].iloc[0]), "origin_lon_deg": float(gnss["lon_deg"].iloc[0])}

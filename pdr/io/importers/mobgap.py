@@ -26,7 +26,6 @@ says which); no ``reference/`` at all when neither has a bout (warned).
 from __future__ import annotations
 
 import math
-import warnings
 from pathlib import Path
 from typing import Any
 
@@ -34,7 +33,7 @@ import numpy as np
 import pandas as pd
 
 from pdr.constants import GRAVITY_MPS2
-from pdr.errors import InputError
+from pdr.errors import InputError, warn
 from pdr.io.importers._common import imu_frame, require_dir, require_file, write_recordings
 from pdr.io.recording import Recording
 
@@ -112,8 +111,7 @@ def _reference(standards: Any, what: str) -> dict[str, Any]:
             chosen = name
             break
     if chosen is None:
-        warnings.warn(f"{what}: no walking bout in any reference system ({', '.join(REFERENCE_SYSTEMS)}); no reference/ written",
-                      stacklevel=3)
+        warn(f"{what}: no walking bout in any reference system ({', '.join(REFERENCE_SYSTEMS)}); no reference/ written")
         return {}
     system = getattr(standards, chosen)
     fs = _scalar(system, "Fs")
@@ -152,8 +150,8 @@ def _reference(standards: Any, what: str) -> dict[str, Any]:
     strides_df = pd.DataFrame(strides, columns=["t_start_s", "t_end_s", "foot", "length_m"])
     bouts_df = pd.DataFrame(bouts)
     if bouts_df["length_m"].isna().any():
-        warnings.warn(f"{what}: {int(bouts_df['length_m'].isna().sum())} {chosen} bout(s) without a Length; "
-                      "distance_m sums the others", stacklevel=3)
+        warn(f"{what}: {int(bouts_df['length_m'].isna().sum())} {chosen} bout(s) without a Length; "
+             "distance_m sums the others")
     summary = {
         "reference_system": chosen,
         "distance_m": float(np.nansum(bouts_df["length_m"])),

@@ -17,13 +17,12 @@ A leading all-zero row is dropped with a warning, and so are repeated time stamp
 from __future__ import annotations
 
 import re
-import warnings
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from pdr.errors import InputError
+from pdr.errors import InputError, warn
 from pdr.io.importers._common import (
     imu_frame, increasing_mask, numeric_array, read_table, require_finite, safe_id, steady_clock, write_recordings,
 )
@@ -44,7 +43,7 @@ _VALIDATION_NAME = re.compile(r"^(?P<user>[A-Za-z]+\d*)_(?P<position>[A-Za-z]+)_
 def _placement(position: str, what: str) -> str:
     placement = PLACEMENT_BY_POSITION.get(position.lower())
     if placement is None:
-        warnings.warn(f"{what}: unknown carrying position {position!r}; placement set to 'unknown'", stacklevel=3)
+        warn(f"{what}: unknown carrying position {position!r}; placement set to 'unknown'")
         return "unknown"
     return placement
 
@@ -56,7 +55,7 @@ def _drop_leading_zero_rows(t: np.ndarray, acc: np.ndarray, what: str) -> int:
         raise InputError(f"{what}: expected accelerometer samples, found only all-zero rows")
     first = int(nonzero[0])
     if first:
-        warnings.warn(f"{what}: dropped {first} leading all-zero row(s) (logger start-up)", stacklevel=3)
+        warn(f"{what}: dropped {first} leading all-zero row(s) (logger start-up)")
     return first
 
 

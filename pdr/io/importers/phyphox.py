@@ -29,14 +29,13 @@ from __future__ import annotations
 
 import csv
 import re
-import warnings
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pandas as pd
 
-from pdr.errors import InputError
+from pdr.errors import InputError, warn
 from pdr.io.importers._common import numeric_array, read_table, safe_id, source_folder, write_recordings
 from pdr.io.importers._phone import Series, clean_series, combine_imu, gnss_table, require_gravity, require_overlap
 from pdr.io.recording import Recording
@@ -161,7 +160,7 @@ def import_source(src: Path, dest: Path, *, rate_hz: float | None = None, force:
         found: dict[str, tuple[np.ndarray, dict[str, int], pd.DataFrame, str]] = {}
         for path in files:
             if path.stat().st_size == 0:
-                warnings.warn(f"{path.name}: empty file; taken as absent", stacklevel=2)
+                warn(f"{path.name}: empty file; taken as absent")
                 continue
             df = _read(path, path.name)
             for time_col, sensors in _classify(df, path.name):
@@ -184,8 +183,8 @@ def import_source(src: Path, dest: Path, *, rate_hz: float | None = None, force:
         runs = _runs(folder)
         base = safe_id(src.stem if src.is_file() else src.name)
         if len(runs) > 1:
-            warnings.warn(f"{what}: the experiment was paused {len(runs) - 1} time(s) (meta/time.csv); one recording per "
-                          "run, named ..._run1, _run2, ...", stacklevel=2)
+            warn(f"{what}: the experiment was paused {len(runs) - 1} time(s) (meta/time.csv); one recording per "
+                 "run, named ..._run1, _run2, ...")
         recordings = []
         for k, (t_start, _, sys_start) in enumerate(runs):
             def series(kind: str) -> Series | None:
@@ -197,7 +196,7 @@ def import_source(src: Path, dest: Path, *, rate_hz: float | None = None, force:
 
             acc = series("acc")
             if len(runs) > 1 and len(acc[0]) < 2:
-                warnings.warn(f"{what}: run {k + 1} has no acceleration samples; skipped", stacklevel=2)
+                warn(f"{what}: run {k + 1} has no acceleration samples; skipped")
                 continue
             imu = combine_imu(acc, series("gyr"), series("mag"), series("baro"), what)
             rec_id = f"{base}_run{k + 1}" if len(runs) > 1 else base
@@ -212,7 +211,7 @@ def import_source(src: Path, dest: Path, *, rate_hz: float | None = None, force:
                                        cols["h_acc"][rows] if cols["h_acc"] is not None else None, name)
                 require_overlap(gnss["t_s"].to_numpy(), imu["t_s"].to_numpy(), name)
                 if geo is None:
-                    warnings.warn(f"{name}: no valid fix; gnss.csv not written", stacklevel=2)
+                    warn(f"{name}: no valid fix; gnss.csv not written")
                     gnss = None
                 else:
                     meta["geo"] = geo

@@ -29,7 +29,6 @@ Recording name: the export folder's (or zip's) name. Placement ``unknown`` (the 
 
 from __future__ import annotations
 
-import warnings
 from pathlib import Path
 from typing import Any
 
@@ -37,7 +36,7 @@ import numpy as np
 import pandas as pd
 
 from pdr.constants import GRAVITY_MPS2
-from pdr.errors import InputError
+from pdr.errors import InputError, warn
 from pdr.io.importers._common import (
     find_export_root, interp_columns, numeric_array, read_table, safe_id, source_folder, write_recordings,
 )
@@ -61,7 +60,7 @@ def _read(folder: Path, name: str, columns: tuple[str, ...], optional: tuple[str
     if not path.is_file():
         return None
     if path.stat().st_size == 0 and may_be_empty:
-        warnings.warn(f"{name}: empty file (the sensor gave no data); taken as absent", stacklevel=3)
+        warn(f"{name}: empty file (the sensor gave no data); taken as absent")
         return None
     df = read_table(path, name, last_break=False)
     df.columns = [str(c).strip() for c in df.columns]
@@ -147,8 +146,8 @@ def _aligned_ns(raw: _Raw, name: str, ref_epoch_ns: float | None) -> np.ndarray:
     epoch = _start_epoch_ns(raw)
     if ref_epoch_ns is None or epoch is None or abs(epoch - ref_epoch_ns) <= CLOCK_AGREEMENT_S * NS_PER_S:
         return raw[0]
-    warnings.warn(f"{name}: its time column is {(epoch - ref_epoch_ns) / NS_PER_S:+.1f} s from the accelerometer's "
-                  "clock origin; aligned through seconds_elapsed (both count from the start tap)", stacklevel=3)
+    warn(f"{name}: its time column is {(epoch - ref_epoch_ns) / NS_PER_S:+.1f} s from the accelerometer's "
+         "clock origin; aligned through seconds_elapsed (both count from the start tap)")
     return ref_epoch_ns + raw[2]["seconds_elapsed"] * NS_PER_S
 
 
@@ -163,8 +162,8 @@ def import_source(src: Path, dest: Path, *, rate_hz: float | None = None, force:
         sign = -1.0 if ios else 1.0
         require_gravity(_seconds(acc_raw[0], t0), f, acc_name, " (the app's Gravity sensor is needed beside it)")
         if ios:
-            warnings.warn(f"{what}: iOS export without standardised frames; acceleration negated to Android's "
-                          "convention (+z up when the phone lies flat)", stacklevel=2)
+            warn(f"{what}: iOS export without standardised frames; acceleration negated to Android's "
+                 "convention (+z up when the phone lies flat)")
         ref_epoch = _start_epoch_ns(acc_raw)
         loc = _read(folder, "Location.csv", ("latitude", "longitude"), ("altitude", "horizontalAccuracy"))
         start_ns = float(t0)
@@ -190,7 +189,7 @@ def import_source(src: Path, dest: Path, *, rate_hz: float | None = None, force:
                                    extra["altitude"], extra["horizontalAccuracy"], "Location.csv")
             require_overlap(gnss["t_s"].to_numpy(), imu["t_s"].to_numpy(), "Location.csv")
             if geo is None:
-                warnings.warn("Location.csv: no valid fix; gnss.csv not written", stacklevel=2)
+                warn("Location.csv: no valid fix; gnss.csv not written")
                 gnss = None
             else:
                 meta["geo"] = geo
