@@ -1,13 +1,12 @@
 """Run the README's command examples and check (``--update``: rewrite) the output they show.
 
-An example is a fenced block right after a line ``<!-- example -->``, or ``<!-- example: slow -->`` for one that takes
-minutes (run with ``--all``; ``make test`` checks the others, ``tests/test_readme_examples.py``). Each ``$ `` line of
+An example is a fenced block right after a line ``<!-- example -->``; ``make test`` checks them all
+(``tests/test_readme_examples.py``, about two minutes of CPU). Each ``$ `` line of
 the block is a command, run by bash in one scratch folder shared by all examples in README order, with this
 checkout's ``pdr`` first and ``configs/`` linked in; the lines after it, up to the next ``$ ``, are what it prints (stdout and stderr together).
 Speeds (``frames/s``) and the scratch folder's path are masked before comparing.
 
-    python docs/readme_examples.py            # check the fast examples; exit 1 and a diff when one drifted
-    python docs/readme_examples.py --all      # the slow ones too
+    python docs/readme_examples.py            # check every example; exit 1 and a diff when one drifted
     python docs/readme_examples.py --update   # write what the commands print now into README.md
 """
 
@@ -25,7 +24,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
-MARKER = re.compile(r"^<!-- example(: slow)? -->$")
+MARKER = re.compile(r"^<!-- example -->$")
 MASKS = [(re.compile(r"\d+(\.\d+)? frames/s"), "<N> frames/s")]  # speeds vary with the machine's load
 
 
@@ -36,15 +35,13 @@ class Example:
 
     first: int
     last: int
-    slow: bool
     commands: list[tuple[str, list[str]]]
 
 
 def parse(lines: list[str]) -> list[Example]:
     examples = []
     for i, line in enumerate(lines):
-        match = MARKER.match(line.strip())
-        if not match:
+        if not MARKER.match(line.strip()):
             continue
         if i + 1 >= len(lines) or not lines[i + 1].startswith("```"):
             raise SystemExit(f"README.md line {i + 1}: expected a fenced block after the example marker")
@@ -57,7 +54,7 @@ def parse(lines: list[str]) -> list[Example]:
                 commands[-1][1].append(text)
             else:
                 raise SystemExit(f"README.md line {i + 3}: expected the block to start with a `$ ` command")
-        examples.append(Example(first=i + 2, last=end - 1, slow=bool(match.group(1)), commands=commands))
+        examples.append(Example(first=i + 2, last=end - 1, commands=commands))
     return examples
 
 
@@ -80,7 +77,7 @@ def run_command(command: str, scratch: Path) -> list[str]:
     return done.stdout.splitlines()
 
 
-def check(readme: Path = README, *, run_slow: bool = False, update: bool = False, scratch: Path | None = None) -> list[str]:
+def check(readme: Path = README, *, update: bool = False, scratch: Path | None = None) -> list[str]:
     """Run the examples; return one unified diff per command whose shown output differs (empty: all match). With
     ``update`` the README gets the new output instead."""
     lines = readme.read_text(encoding="utf-8").splitlines()
@@ -90,8 +87,6 @@ def check(readme: Path = README, *, run_slow: bool = False, update: bool = False
         scratch = Path(scratch or tmp).resolve()
         (scratch / "configs").symlink_to(ROOT / "configs")  # the examples name configs/ as from the repository root
         for example in parse(lines):
-            if example.slow and not run_slow:
-                continue
             block = []
             for command, shown in example.commands:
                 actual = masked(run_command(command, scratch), scratch)
@@ -109,15 +104,14 @@ def check(readme: Path = README, *, run_slow: bool = False, update: bool = False
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--all", action="store_true", help="also run the slow examples")
     parser.add_argument("--update", action="store_true", help="write the output printed now into README.md")
     args = parser.parse_args(argv)
-    diffs = check(run_slow=args.all, update=args.update)
+    diffs = check(update=args.update)
     for diff in diffs:
         print(diff)
     if diffs and not args.update:
         print(f"{len(diffs)} README example(s) no longer print what README.md shows; "
-              "run python docs/readme_examples.py --update (and --all for the slow ones)", file=sys.stderr)
+              "run python docs/readme_examples.py --update", file=sys.stderr)
         return 1
     return 0
 
