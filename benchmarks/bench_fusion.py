@@ -141,7 +141,7 @@ def synthetic_strides(w: dict, bias: float, source: str = "leg_camera", seed: in
 
 ROOT = Path(__file__).resolve().parents[1]
 SIM_CONFIGS = ROOT / "configs" / "sim"
-HUMOLIRE = Path("humolire_phone_landmarks/data/imus/1/square_2x")
+HUMOLIRE = Path("data/imus/1/square_2x")  # inside the humolire_phone_landmarks dataset
 ANCHOR_LADETTO = "Ladetto et al. 2000: 1.8% distance error (40.8 m over 2,300 m) with DGPS-calibrated steps"
 ANCHOR_ISSUE = "issue 4 target"
 

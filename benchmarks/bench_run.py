@@ -16,7 +16,7 @@ from pdr.pipelines.run import run_recording
 from pdr.sim import simulate_to_disk
 
 ROOT = Path(__file__).resolve().parents[1]
-HUMOLIRE = Path("humolire_phone_landmarks/data/imus/1/square_2x")
+HUMOLIRE = Path("data/imus/1/square_2x")  # inside the humolire_phone_landmarks dataset
 SIM_SCENARIOS = {"quick": "configs/sim/walk_short.toml", "full": "configs/sim/walk_30min_gps.toml"}
 SIM_SEED = 7
 LADETTO = "Ladetto et al. 2000: 1.8% over 2,300 m with a DGPS-calibrated per-user model"
