@@ -181,6 +181,7 @@ class ZuptInsStride(Algorithm):
         P = np.diag([1e-8] * 3 + [self.zupt_std_mps**2] * 3 + [self.initial_tilt_std_rad**2] * 2 + [1e-10])
         gyr_ms = uniform_filter1d((gyr**2).sum(axis=1), max(3, self.stance_.window_samples_), mode="nearest")
         zupt_var = self.zupt_std_mps**2 + self.sensor_height_m**2 * gyr_ms[epochs]  # the rolling foot's velocity
+        eye3 = np.eye(3)
         na2, ng2 = self.acc_noise_mps2_rthz**2, self.gyr_noise_radps_rthz**2
         ep_p, ep_v = np.zeros((n_ep, 3)), np.zeros((n_ep, 3))
         ep_M, ep_P = np.zeros((n_ep, 3, 3)), np.zeros((n_ep, 9, 9))
@@ -213,7 +214,7 @@ class ZuptInsStride(Algorithm):
             q[6:9, 3:6] = q[3:6, 6:9].T
             P = phi @ P @ phi.T + q
             # zero-velocity update: z = 0 - v, H = [0 I 0]
-            K = P[:, 3:6] @ np.linalg.inv(P[3:6, 3:6] + zupt_var[m] * np.eye(3))
+            K = P[:, 3:6] @ np.linalg.inv(P[3:6, 3:6] + zupt_var[m] * eye3)
             dx = K @ (-v)
             p = p + dx[0:3]
             v = v + dx[3:6]
