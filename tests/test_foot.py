@@ -482,8 +482,8 @@ def _closed_loops(tmp_path) -> dict[str, Path]:
 
 
 def test_pdr_run_keeps_the_ins_path_on_real_closed_loops(tmp_path):
-    """pdr run ends no further from the start than the foot INS alone (+1% of the path); evaluate reports it; the
-    quantised OpenShoe sensor gives no saturation warning and no dropped stride."""
+    """pdr run ends no further from the start than the foot INS alone (+1% of the path) and within 0.5% of the path;
+    evaluate reports it; the quantised OpenShoe sensor gives no saturation warning and no dropped stride."""
     from pdr.eval.evaluate import evaluate_run
     from pdr.io.recording import load_recording
     from pdr.pipelines.run import run_recording
@@ -499,7 +499,7 @@ def test_pdr_run_keeps_the_ins_path_on_real_closed_loops(tmp_path):
         ins_closure = float(np.hypot(*ins.final_position_m_[:2]))
         m = evaluate_run(tmp_path / f"out_{name}", rec_dir)
         assert m["loop_closure_m"] <= ins_closure + 0.01 * path_m, (name, m, ins_closure)
-        assert m["loop_closure_pct"] < 1.0 and abs(m["distance_m"] - path_m) < 0.02 * path_m
+        assert m["loop_closure_pct"] <= 0.5 and abs(m["distance_m"] - path_m) < 0.02 * path_m  # the results target
         assert summary["n_strides"] == len(ins.strides_)
         assert not [w for w in caught if "saturat" in str(w.message) or "dropped" in str(w.message)], name
 
