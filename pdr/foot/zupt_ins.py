@@ -41,6 +41,16 @@ def _small_rotation(r: np.ndarray) -> np.ndarray:
                      [z * x * u - y * s, z * y * u + x * s, c + z * z * u]])
 
 
+def _inverse3(a: np.ndarray) -> np.ndarray:
+    """Inverse of one 3x3 matrix by its adjugate, on Python floats (this runs once per update)."""
+    (a00, a01, a02), (a10, a11, a12), (a20, a21, a22) = a.tolist()
+    c00, c01, c02 = a11 * a22 - a12 * a21, a12 * a20 - a10 * a22, a10 * a21 - a11 * a20
+    det = a00 * c00 + a01 * c01 + a02 * c02
+    return np.array([[c00, a02 * a21 - a01 * a22, a01 * a12 - a02 * a11],
+                     [c01, a00 * a22 - a02 * a20, a02 * a10 - a00 * a12],
+                     [c02, a01 * a20 - a00 * a21, a00 * a11 - a01 * a10]]) / det
+
+
 def _cumtrapz(y: np.ndarray, t: np.ndarray) -> np.ndarray:
     out = np.zeros_like(y)
     out[1:] = np.cumsum(0.5 * (y[1:] + y[:-1]) * np.diff(t)[:, None], axis=0)
@@ -214,7 +224,7 @@ class ZuptInsStride(Algorithm):
             q[6:9, 3:6] = q[3:6, 6:9].T
             P = phi @ P @ phi.T + q
             # zero-velocity update: z = 0 - v, H = [0 I 0]
-            K = P[:, 3:6] @ np.linalg.inv(P[3:6, 3:6] + zupt_var[m] * eye3)
+            K = P[:, 3:6] @ _inverse3(P[3:6, 3:6] + zupt_var[m] * eye3)
             dx = K @ (-v)
             p = p + dx[0:3]
             v = v + dx[3:6]
