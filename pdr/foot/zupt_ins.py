@@ -71,20 +71,22 @@ class ZuptInsStride(Algorithm):
         of ``benchmarks/bench_foot.py`` ``GRID`` with the least mean score over the declared tuning set (gaitmap
         mocap strides, x-io and OpenShoe loop closure, a simulated slow walk), each score divided by its target
         (3 cm, 0.5%); the benchmark prints each recording's score with the candidate chosen without it.
-    zupt_std_mps : standard deviation of the zero-velocity pseudo-measurement of a foot that does not rotate (the
-        floor of the rolling term below; 3 mm/s, under the rolling term of a resting foot, 5 cm x 0.03-0.06 rad/s).
+    zupt_std_mps : standard deviation of the zero-velocity pseudo-measurement of a foot that does not rotate: the
+        floor under the rolling term below, for a sensor without noise. 3 mm/s is about the rolling term of a foot at
+        rest (5 cm x 0.03-0.06 rad/s); 1 or 5 mm/s move the benchmark's loop closures by less than 0.02% of the path.
     sensor_height_m : distance from the sensor to the point of the sole on the ground. A planted foot still rolls
         (heel strike to flat foot, heel rise): the sensor then moves at ``|w| x sensor_height_m``, so each update's
         variance is ``zupt_std_mps^2 + sensor_height_m^2 x`` the mean square angular rate over the detector's window,
         measured on the recording's own stance. 5 cm: a shoe's sole and heel are 2-4 cm thick, and a sensor on the
-        instep or the heel cap sits some centimetres above them.
+        instep or the heel cap sits some centimetres above them. Not chosen on the benchmark; 3-7 cm give 0.04-0.17%
+        (x-io) and 0.41-0.51% (OpenShoe) loop closure and 1.8-2.6 cm gaitmap stride MAE.
     zupt_rate_hz : zero-velocity updates are applied at this rate during stance (and at the first and last sample
         of every stance); between updates the error state is propagated in one exact step.
     initial_tilt_std_rad : standard deviation of roll and pitch after levelling on the first stance.
     gyr_bias_min_rest_s : when the recording starts with a rest at least this long, its mean angular rate is taken as
-        the gyroscope bias (0, the default, disables it: on both real recordings of the benchmark removing the mean
-        rate of the first rest made things worse, gaitmap strides 1.8 -> 5.8 cm MAE, x-io loop 1.8 -> 7.5 cm; the
-        first "rest" apparently holds slow foot motion).
+        the gyroscope bias (0, the default, disables it: removing the mean rate of a first rest of 1 s or more made
+        the gaitmap strides 2.2 -> 5.9 cm MAE and the x-io loop 0.10 -> 0.17%, the OpenShoe loop 0.46 -> 0.30%; the
+        first "rest" apparently holds slow foot motion, 10 times the mean rate that the sensor noise would leave).
     gravity_from_rest : subtract the gravity the accelerometer itself reads at rest (the norm of the mean specific
         force over that first rest, else the median over the stances) instead of the standard 9.80665 m/s^2, which
         removes the vertical part of an accelerometer bias / scale error (no measurable effect on the benchmark
