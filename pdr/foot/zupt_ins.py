@@ -121,9 +121,10 @@ class ZuptInsStride(Algorithm):
     ``R f - g``. Error state ``[dp, dv, dtheta]``: ``dv' = -[R f x] dtheta + w_a``, ``dtheta' = w_g``. Between two
     updates ``M`` is constant, so the nominal state and the transition matrix over the interval follow in closed form
     from cumulative integrals of ``R_gyr f`` (a handful of numpy operations per update instead of a loop over samples);
-    the process noise uses the interval's mean specific force. Updates: ``v = 0`` during stance, with the variance of a foot that rolls about its contact
-    point (``sensor_height_m``; adaptive zero-velocity noise as in Wagstaff, Peretroukhin & Kelly 2017: the stance's
-    own motion weighs its updates, so the heel rise and the landing count little without a fixed margin). Per stride (mid-stance
+    the process noise uses the interval's mean specific force. Updates: ``v = 0`` during stance, with the variance of
+    a foot that rolls about its contact point (rigid-body velocity ``w x r``, ``|r|`` = ``sensor_height_m``): each
+    stance's own angular rate weighs its updates, so the landing and the heel rise count little and no fixed margin
+    is cut from the ends of the stance. Per stride (mid-stance
     to mid-stance of the same foot) the displacement variance along the stride is ``u' (P_end - P_start) u`` (position
     errors accumulate as independent increments), and the heading-change variance is the increment of the yaw-error
     variance. Across the stride the increment of the absolute covariance is not the stride's own error: the yaw
