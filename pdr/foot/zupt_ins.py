@@ -74,12 +74,12 @@ class ZuptInsStride(Algorithm):
     zupt_std_mps : standard deviation of the zero-velocity pseudo-measurement of a foot that does not rotate: the
         floor under the rolling term below, for a sensor without noise. 3 mm/s is about the rolling term of a foot at
         rest (5 cm x 0.03-0.06 rad/s); 1 or 5 mm/s move the benchmark's loop closures by less than 0.02% of the path.
-    sensor_height_m : distance from the sensor to the point of the sole on the ground. A planted foot still rolls
-        (heel strike to flat foot, heel rise): the sensor then moves at ``|w| x sensor_height_m``, so each update's
-        variance is ``zupt_std_mps^2 + sensor_height_m^2 x`` the mean square angular rate over the detector's window,
-        measured on the recording's own stance. 5 cm: a shoe's sole and heel are 2-4 cm thick, and a sensor on the
-        instep or the heel cap sits some centimetres above them. Not chosen on the benchmark; 3-7 cm give 0.04-0.17%
-        (x-io) and 0.41-0.51% (OpenShoe) loop closure and 1.8-2.6 cm gaitmap stride MAE.
+    sensor_above_sole_m : distance from the sensor to the point of the sole on the ground. A planted foot still rolls
+        (heel strike to flat foot, heel rise): the sensor then moves at ``|w| x sensor_above_sole_m``, so each
+        update's variance is ``zupt_std_mps^2 + sensor_above_sole_m^2 x`` the mean square angular rate over the
+        detector's window, measured on the recording's own stance. 5 cm: a shoe's sole and heel are 2-4 cm thick,
+        and a sensor on the instep or the heel cap sits some centimetres above them. Not chosen on the benchmark;
+        3-7 cm give 0.04-0.17% (x-io) and 0.41-0.51% (OpenShoe) loop closure and 1.8-2.6 cm gaitmap stride MAE.
     zupt_rate_hz : zero-velocity updates are applied at this rate during stance (and at the first and last sample
         of every stance); between updates the error state is propagated in one exact step.
     initial_tilt_std_rad : standard deviation of roll and pitch after levelling on the first stance.
@@ -122,14 +122,14 @@ class ZuptInsStride(Algorithm):
     updates ``M`` is constant, so the nominal state and the transition matrix over the interval follow in closed form
     from cumulative integrals of ``R_gyr f`` (a handful of numpy operations per update instead of a loop over samples);
     the process noise uses the interval's mean specific force. Updates: ``v = 0`` during stance, with the variance of
-    a foot that rolls about its contact point (rigid-body velocity ``w x r``, ``|r|`` = ``sensor_height_m``): each
+    a foot that rolls about its contact point (rigid-body velocity ``w x r``, ``|r|`` = ``sensor_above_sole_m``): each
     stance's own angular rate weighs its updates, so the landing and the heel rise count little and no fixed margin
-    is cut from the ends of the stance. Per stride (mid-stance
-    to mid-stance of the same foot) the displacement variance along the stride is ``u' (P_end - P_start) u`` (position
-    errors accumulate as independent increments), and the heading-change variance is the increment of the yaw-error
-    variance. Across the stride the increment of the absolute covariance is not the stride's own error: the yaw
-    uncertainty swings the whole path walked so far (the lateral variance grows with the distance from the start),
-    so the stride's error across is taken as the one along it and its direction error as the heading change's.
+    is cut from the ends of the stance. Per stride (mid-stance to mid-stance of the same foot) the displacement
+    variance along the stride is ``u' (P_end - P_start) u`` (position errors accumulate as independent increments),
+    and the heading-change variance is the increment of the yaw-error variance. Across the stride the increment of
+    the absolute covariance is not the stride's own error: the yaw uncertainty swings the whole path walked so far
+    (the lateral variance grows with the distance from the start), so the stride's error across is taken as the one
+    along it and its direction error as the heading change's.
 
     Examples
     --------
@@ -138,7 +138,7 @@ class ZuptInsStride(Algorithm):
     """
 
     def __init__(self, *, foot: str = "left", acc_noise_mps2_rthz: float = 0.03, gyr_noise_radps_rthz: float = 0.03,
-                 zupt_std_mps: float = 0.003, sensor_height_m: float = 0.05, zupt_rate_hz: float = 20.0,
+                 zupt_std_mps: float = 0.003, sensor_above_sole_m: float = 0.05, zupt_rate_hz: float = 20.0,
                  initial_tilt_std_rad: float = 0.02, gyr_bias_min_rest_s: float = 0.0, gravity_from_rest: bool = True,
                  min_length_std_m: float = 0.015,
                  zero_velocity: dict | None = None) -> None:
@@ -147,7 +147,7 @@ class ZuptInsStride(Algorithm):
         self.gyr_noise_radps_rthz = gyr_noise_radps_rthz
         self.zupt_std_mps = zupt_std_mps
         self.zupt_rate_hz = zupt_rate_hz
-        self.sensor_height_m = sensor_height_m
+        self.sensor_above_sole_m = sensor_above_sole_m
         self.initial_tilt_std_rad = initial_tilt_std_rad
         self.gyr_bias_min_rest_s = gyr_bias_min_rest_s
         self.gravity_from_rest = gravity_from_rest
@@ -193,7 +193,7 @@ class ZuptInsStride(Algorithm):
         p, v = np.zeros(3), np.zeros(3)
         P = np.diag([1e-8] * 3 + [self.zupt_std_mps**2] * 3 + [self.initial_tilt_std_rad**2] * 2 + [1e-10])
         gyr_ms = uniform_filter1d((gyr**2).sum(axis=1), max(3, self.stance_.window_samples_), mode="nearest")
-        zupt_var = self.zupt_std_mps**2 + self.sensor_height_m**2 * gyr_ms[epochs]  # the rolling foot's velocity
+        zupt_var = self.zupt_std_mps**2 + self.sensor_above_sole_m**2 * gyr_ms[epochs]  # the rolling foot's velocity
         eye3 = np.eye(3)
         na2, ng2 = self.acc_noise_mps2_rthz**2, self.gyr_noise_radps_rthz**2
         ep_p, ep_v = np.zeros((n_ep, 3)), np.zeros((n_ep, 3))
