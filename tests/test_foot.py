@@ -478,8 +478,8 @@ def _closed_loops(tmp_path) -> dict[str, Path]:
 
 
 def test_pdr_run_keeps_the_ins_path_on_real_closed_loops(tmp_path):
-    """pdr run ends no further from the start than the foot INS alone (+1% of the path); evaluate reports it; the
-    quantised OpenShoe sensor gives no saturation warning and no dropped stride."""
+    """pdr run ends no further from the start than the foot INS alone (+1% of the path) and within 0.5% of the path;
+    evaluate reports it; the quantised OpenShoe sensor gives no saturation warning and no dropped stride."""
     from pdr.eval.evaluate import evaluate_run
     from pdr.io.recording import load_recording
     from pdr.pipelines.run import run_recording
@@ -494,7 +494,7 @@ def test_pdr_run_keeps_the_ins_path_on_real_closed_loops(tmp_path):
         ins_closure = float(np.hypot(*ins.final_position_m_[:2]))
         m = evaluate_run(tmp_path / f"out_{name}", rec_dir)
         assert m["loop_closure_m"] <= ins_closure + 0.01 * path_m, (name, m, ins_closure)
-        assert m["loop_closure_pct"] < 1.0 and abs(m["distance_m"] - path_m) < 0.02 * path_m
+        assert m["loop_closure_pct"] <= 0.5 and abs(m["distance_m"] - path_m) < 0.02 * path_m  # the results target
         assert summary["n_strides"] == len(ins.strides_)
         assert not [m for m in caught if "saturat" in m or "dropped" in m], name
 
@@ -536,8 +536,8 @@ def test_strides_and_loop_closure_do_not_depend_on_the_sampling_rate(tmp_path, r
         assert abs(closure[1] - closure[0]) <= 0.003 * path_m, (name, closure)
 
 
-@pytest.mark.parametrize("rate_hz", [102.4])
-def test_gaitmap_strides_at_half_rate(gaitmap_walk, rate_hz):
+@pytest.mark.parametrize("rate_hz", [100.0, 102.4, 200.0])
+def test_gaitmap_strides_at_other_rates(gaitmap_walk, rate_hz):
     rec = gaitmap_walk["walk_2x20m"]
     half = Recording(meta=rec.meta, imu=_resampled(rec.imu, rate_hz),
                      extra_imus={"foot_right": _resampled(rec.extra_imus["foot_right"], rate_hz)})
@@ -546,6 +546,29 @@ def test_gaitmap_strides_at_half_rate(gaitmap_walk, rate_hz):
     for foot in ("left", "right"):
         a, b = native[native["foot"] == foot], out[out["foot"] == foot]
         assert _f1(a["t_end_s"], b["t_end_s"], 0.05) >= 0.95
+
+
+def test_walking_forms_learnt_at_204_8_hz_name_the_walk_alike_at_102_4_hz(gaitmap_walk):
+    from pdr.gait.forms import FourierGaitForms
+    from pdr.pipelines.gait_forms import FOOT_N_FORMS, recording_cycles
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        train = pd.concat([recording_cycles(r, {}) for r in gaitmap_walk.values()], ignore_index=True)
+        forms = FourierGaitForms(n_forms=FOOT_N_FORMS).fit(train)
+        rec = gaitmap_walk["walk_2x20m"]
+        half = Recording(meta=rec.meta, imu=_resampled(rec.imu, 102.4),
+                         extra_imus={"foot_right": _resampled(rec.extra_imus["foot_right"], 102.4)})
+        native = forms.classify(recording_cycles(rec, {})).cycles_forms_
+        other = forms.classify(recording_cycles(half, {})).cycles_forms_
+    assert native["form"].nunique() > 1  # more than one form named: agreeing is not trivial
+    same = []
+    for _, c in native.iterrows():  # the cycle of the same foot sharing the most time with it
+        mine = other[other["source"] == c["source"]]
+        shared = np.minimum(mine["t_end_s"], c["t_end_s"]) - np.maximum(mine["t_start_s"], c["t_start_s"])
+        j = int(np.argmax(shared.to_numpy()))
+        same.append(shared.iloc[j] > 0.5 * (c["t_end_s"] - c["t_start_s"]) and mine["form"].iloc[j] == c["form"])
+    assert len(native) > 50 and np.mean(same) >= 0.95
 
 
 def test_implausible_strides_are_named_and_dropped_never_an_error():

@@ -132,7 +132,8 @@ def foot_strides(rec: Recording, config: dict) -> pd.DataFrame | None:
     out = pd.concat(tables, ignore_index=True)
     out = out.sort_values("t_start_s", kind="stable").reset_index(drop=True)
     out["calibrated"] = False
-    # the INS alone beats its double-feet combination on the gaitmap strides (1.8 vs 2.0 cm), FootStep-Tracker does not
+    # double feet on the gaitmap strides: FootStep-Tracker 5.1 -> 4.7 cm MAE, the INS 2.2 -> 2.0 cm (off by default:
+    # the INS strides of the two feet then stay each foot's own measure for the fusion's chain)
     if section.get("double_feet", method == "footstep_tracker") and out["foot"].nunique() == 2:
         cal = DoubleFeetCalibration.from_config(section.get("double_feet_calibration")).estimate(out)
         out = cal.strides_[out.columns]
