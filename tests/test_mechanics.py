@@ -167,3 +167,20 @@ def test_pdr_run_writes_bouts(tmp_path, capsys):
     assert main(["run", str(rec), "-o", str(tmp_path / "bad")]) == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("error:") and not (tmp_path / "bad").exists()
+
+
+@pytest.mark.parametrize("case, placement, gnss, mass, says, empty", [
+    ("no body mass", "waist", None, False, "mass_kg", ["power_gravity_w", "power_inertia_w", "power_external_w"]),
+    ("phone in a pocket", "pocket", None, True, "pocket", ["vertical_lift_m", "speed_variation_mps", "power_external_w"]),
+    ("phone in a hand, GNSS at 1 Hz", "hand", {"rate_hz": 1.0}, True, "GNSS at 1.0 Hz", ["vertical_lift_m"]),
+    ("metre-level GNSS at 5 Hz", "pocket", {"rate_hz": 5.0}, True, "h_acc_m", ["vertical_lift_m", "power_gravity_w"]),
+])
+def test_pdr_run_says_once_what_bouts_csv_lacks(tmp_path, capsys, case, placement, gnss, mass, says, empty):
+    """Bad input of the mechanics through ``pdr run``: the columns that cannot be had are empty, with one warning."""
+    rec = save_recording(simulate(_scenario(placement, gnss, mass), seed=6), tmp_path / "rec")
+    capsys.readouterr()
+    assert main(["run", str(rec), "-o", str(tmp_path / "out")]) == 0
+    lines = [line for line in capsys.readouterr().err.splitlines() if "bouts.csv" in line]
+    assert len(lines) == 1 and lines[0].startswith("warning:") and says in lines[0], case
+    bouts = pd.read_csv(tmp_path / "out" / "bouts.csv")
+    assert len(bouts) == 2 and bouts[empty].isna().all().all() and bouts["speed_mps"].notna().all(), case
