@@ -54,7 +54,7 @@ from scipy.signal import butter, sosfiltfilt
 
 from pdr.constants import GRAVITY_MPS2
 from pdr.errors import InputError
-from pdr.signals.resample import UniformImu, moving_average
+from pdr.signals.resample import UniformImu
 from pdr.step_length.models import LEG_LENGTH_PER_HEIGHT
 
 BOUT_COLUMNS = ("bout_id", "t_start_s", "t_end_s", "n_steps", "distance_m", "speed_mps", "cadence_spm", "step_length_m",
@@ -69,7 +69,7 @@ GNSS_GRID_HZ = 50.0  # the fixes are interpolated onto this grid to be cut at th
 MISSED_CONTACT_RATIO = 1.6  # a step interval this many times the bout's median spans a missed contact: no mechanics
 KINEMATICS_CUTOFF_HZ = 10.0  # five harmonics of a fast cadence (2 steps/s): the gait's trunk motion; noise above
 DECIMATED_RATE_FACTOR = 5.0  # the low-passed signals are integrated at >= 5 x the cutoff (every k-th sample)
-MEAN_TILT_WINDOW_S = 2.0  # a whole stride even at 1 step/s: the gait's oscillation averages out of the mean direction
+MEAN_TILT_WINDOW_S = 2.0  # vertical window outside the steps: a whole stride even at 1 step/s
 WAVEFORM_BINS = 32  # phase bins of the step-averaged horizontal acceleration (forward axis)
 SPEED_CROSSOVER_HZ = 0.25  # half the left/right alternation of slow walking (1 step/s): step-to-step changes pass
 
@@ -215,7 +215,7 @@ def _complementary_speed(t_s: np.ndarray, a_fwd_mps2: np.ndarray, lever_mps: np.
     n = len(t_start_s)
     rate = 1.0 / (t_s[1] - t_s[0])
     mid = 0.5 * (t_start_s + t_end_s)
-    run = np.cumsum(np.r_[True, ~np.isclose(t_start_s[1:], t_end_s[:-1])]) - 1  # consecutive steps share a contact
+    run = np.cumsum(np.r_[True, t_start_s[1:] != t_end_s[:-1]]) - 1  # consecutive steps share a contact
     label = np.where(seg >= 0, run[np.maximum(seg, 0)], -1)
     edges = np.flatnonzero(np.diff(np.r_[-2, label, -2]))  # blocks of samples with one run label
     sos = butter(2, SPEED_CROSSOVER_HZ, btype="low", fs=rate, output="sos")
