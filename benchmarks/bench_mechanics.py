@@ -8,7 +8,8 @@
 2. The same people with a phone in the trouser pocket and DGPS-grade fixes at 5 Hz on the trunk (the seed's set-up):
    the mechanics from the GNSS positions.
 3. The real lower-back recordings (mobgap, lab, two healthy adults, straight walks and daily living; imported with
-   ``pdr.io.importers``): plausibility against the seed's Table 1 (five adults, 5 min on a track; mean +- SD).
+   ``pdr.io.importers``): plausibility against the seed's Table 1 (five adults, 5 min on a track; mean +- SD), and
+   simulated people of the participant's height, mass and speed as a reference for the pace.
 4. Speed: the bouts stage against the whole ``pdr run`` on one hour (``--quick``: ten minutes).
 
 Run: ``.venv/bin/python -m benchmarks mechanics`` (``--quick``: two people).
@@ -23,7 +24,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from pdr.gait.mechanics import bout_table, step_energies, step_intervals, walking_bouts
+from pdr.gait.mechanics import bout_table, sensor_above_hip_m, step_energies, step_intervals, walking_bouts
 from pdr.io.datasets import dataset_dir
 from pdr.io.importers import import_recordings
 from pdr.io.recording import load_recording, save_recording
@@ -44,6 +45,7 @@ UNITS = {"vertical_lift_m": ("mm", 1e3), "power_gravity_w": ("W", 1.0), "speed_v
          "power_inertia_w": ("W", 1.0), "power_external_w": ("W", 1.0), "speed_mps": ("m/s", 1.0)}
 ANCHOR = "Ladetto et al. 2000 Table 1 (DGPS 5 Hz, 5 adults): lift 55+-14 mm, gravity 70+-27 W, dv 0.17+-0.03 m/s, inertia 19+-7 W"
 MIN_STEPS = 6  # real bouts shorter than this are left out of the plausibility means
+LOOK_ALIKE_SEEDS = (21, 22, 23)
 
 
 def _row(case: str, metric: str, ours, unit: str, target: str, anchor: str = "") -> dict:
@@ -147,8 +149,9 @@ def _real_rows(tmp: Path) -> list[dict]:
                 out = tmp / "mobgap_out" / participant / path.name
                 run_recording(path, out, force=True)
                 b = pd.read_csv(out / "bouts.csv")
-                bouts.append(b.assign(participant=participant, recording=path.name,
-                                      mass_kg=load_recording(path).subject.get("mass_kg")))
+                subject = load_recording(path).subject
+                bouts.append(b.assign(participant=participant, recording=path.name, mass_kg=subject.get("mass_kg"),
+                                      height_m=subject.get("height_m")))
     b = pd.concat(bouts, ignore_index=True)
     b = b[b["n_steps"] >= MIN_STEPS]
     rows = []
@@ -165,7 +168,30 @@ def _real_rows(tmp: Path) -> list[dict]:
                              ANCHOR))
         rows.append(_row(case, "power_external_w (step-weighted mean)", round(float(np.average(g["power_external_w"], weights=w)), 1),
                          "W", "-", "Ladetto et al. 2000: total 72+-35 W"))
+        rows.append(_look_alikes_row(case, float(g["height_m"].iloc[0]), float(g["mass_kg"].iloc[0]),
+                                     float(np.average(g["speed_mps"], weights=w))))
     return rows
+
+
+def _look_alikes_row(case: str, height_m: float, mass_kg: float, speed_mps: float) -> dict:
+    """Simulated people of the participant's height and mass walking 60 s at the participant's speed: their truth and
+    our estimate (from the true contacts) of the lift, speed variation and inertia power, as a reference for the pace."""
+    found = []
+    for seed in LOOK_ALIKE_SEEDS:
+        sc = {"subject": {"height_m": height_m, "mass_kg": mass_kg},
+              "route": {"waypoints_m": [[0.0, 0.0], [60.0, 0.0], [60.0, 30.0], [0.0, 30.0]], "loop": True},
+              "segment": [{"duration_s": STAND_S, "speed_mps": 0.0}, {"duration_s": 60.0, "speed_mps": round(speed_mps, 2)},
+                          {"duration_s": STAND_S, "speed_mps": 0.0}]}
+        rec = simulate(sc, seed=seed)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            ours, _ = walking_bouts(rec.reference["steps"], placement="waist", imu=uniform_imu(rec.imu), mass_kg=mass_kg,
+                                    sensor_above_hip_m=sensor_above_hip_m(rec.subject))
+        found.append((rec.reference["bouts"].iloc[0], ours.iloc[0]))
+    text = "; ".join(f"{col}: " + ", ".join(f"{UNITS[col][1] * t[col]:.3g}/{UNITS[col][1] * o[col]:.3g}" for t, o in found)
+                     for col in ("vertical_lift_m", "speed_variation_mps", "power_inertia_w"))
+    return _row(case, f"simulated look-alikes ({height_m:g} m, {mass_kg:g} kg, {speed_mps:.2f} m/s, {len(found)} seeds): "
+                "lift mm, speed variation m/s, inertia W, truth/ours", text, "mm; m/s; W", "-", "pdr simulate, pelvis-centre truth")
 
 
 def _speed_row(tmp: Path, quick: bool) -> dict:
