@@ -81,6 +81,33 @@ def test_trunk_imu_against_the_simulated_pelvis(walk):
     assert (at_hips["power_inertia_w"] > 1.3 * truth["power_inertia_w"]).all()
 
 
+def test_lever_arm_of_a_pitching_sensor():
+    """A rigid trunk pitching about hips that move at a constant speed and height: the sensor above the hips sees a
+    forward speed varying by 2 h A w, the hips' does not vary (v_sensor = v_hip + omega x r)."""
+    rate, period, speed, lever, amp = 100.0, 0.55, 1.3, 0.14, np.radians(2.0)
+    t = np.arange(0.0, 30.0, 1.0 / rate)
+    w = 2 * np.pi / period
+    th, dth, ddth = amp * np.sin(w * t), amp * w * np.cos(w * t), -amp * w * w * np.sin(w * t)
+    # sensor at (v t + h sin(th), h cos(th)): world specific force, then in the pitched sensor frame
+    fx = lever * (np.cos(th) * ddth - np.sin(th) * dth**2)
+    fz = lever * (-np.sin(th) * ddth - np.cos(th) * dth**2) + GRAVITY_MPS2
+    zero = np.zeros_like(t)
+    imu = pd.DataFrame({"t_s": t, "acc_x_mps2": np.cos(th) * fx - np.sin(th) * fz, "acc_y_mps2": zero,
+                        "acc_z_mps2": np.sin(th) * fx + np.cos(th) * fz, "gyr_x_radps": zero, "gyr_y_radps": dth,
+                        "gyr_z_radps": zero})
+    contacts = np.arange(2.0, 28.0, period)
+    steps = pd.DataFrame({"t_s": contacts, "bout_id": 0, "step_length_m": speed * period})
+    sensor_range = 2 * lever * amp * w
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        at_sensor, _ = walking_bouts(steps, placement="waist", imu=uniform_imu(imu), mass_kg=MASS_KG)
+        at_hips, _ = walking_bouts(steps, placement="waist", imu=uniform_imu(imu), mass_kg=MASS_KG,
+                                   sensor_above_hip_m=lever)
+    np.testing.assert_allclose(at_sensor["speed_variation_mps"], sensor_range, rtol=0.03)
+    assert at_hips["speed_variation_mps"].iloc[0] < 0.02 * sensor_range
+    assert at_hips["power_inertia_w"].iloc[0] < 0.02 * at_sensor["power_inertia_w"].iloc[0]
+
+
 def test_sensor_height_above_the_hips():
     assert sensor_above_hip_m({"sensor_height_m": 1.02, "leg_length_m": 0.90}) == pytest.approx(0.12)
     assert sensor_above_hip_m({"sensor_height_m": 1.02, "height_m": 1.75}) == pytest.approx(1.02 - 0.53 * 1.75)

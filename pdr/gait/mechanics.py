@@ -106,7 +106,8 @@ def _per_segment_mean(x: np.ndarray, seg: np.ndarray, n: int) -> np.ndarray:
 
 
 def _integrate_per_segment(x: np.ndarray, seg: np.ndarray, dt_s: float) -> np.ndarray:
-    """Running integral of ``x`` restarting at 0 at the first sample of each segment (rectangle rule)."""
+    """Running integral of ``x`` restarting at 0 at the first sample of each segment (rectangle rule: the integral up
+    to half a sample after each sample)."""
     c = np.cumsum(x * dt_s)
     first = np.flatnonzero((seg >= 0) & np.r_[True, seg[1:] != seg[:-1]])
     base = np.zeros(len(x))
@@ -164,23 +165,26 @@ def step_energies(t_s: np.ndarray, z_m: np.ndarray, v_mps: np.ndarray, t_start_s
 # ----------------------------------------------------------------------------------------------------------------
 
 
-def _window_mean(x: np.ndarray, half_n: np.ndarray) -> np.ndarray:
-    """Centred mean of ``x`` (N, 3) over ``2 half_n[i] + 1`` samples around each sample (shrinking at the ends)."""
-    c = np.concatenate([np.zeros((1, x.shape[1])), np.cumsum(x, axis=0)])
-    i = np.arange(len(x))
-    lo, hi = np.clip(i - half_n, 0, len(x)), np.clip(i + half_n + 1, 0, len(x))
-    return (c[hi] - c[lo]) / (hi - lo)[:, None]
+def _window_mean(x: np.ndarray, width_n: np.ndarray) -> np.ndarray:
+    """Centred mean of ``x`` (N, 3) over a window of ``width_n[i]`` samples (fractional: the end samples weighted by
+    the part inside; shrinking at the ends of the record)."""
+    c = np.concatenate([np.zeros((1, x.shape[1])), np.cumsum(x, axis=0)])  # c[k]: sum of the first k samples
+    i = np.arange(len(x)) + 0.5  # sample i covers [i, i + 1) in c's index
+    lo, hi = np.clip(i - 0.5 * width_n, 0, len(x)), np.clip(i + 0.5 * width_n, 0, len(x))
+    k = np.arange(len(c))
+    return np.stack([np.interp(hi, k, c[:, j]) - np.interp(lo, k, c[:, j]) for j in range(x.shape[1])], 1) / \
+        (hi - lo)[:, None]
 
 
-def _up_in_sensor(acc_mps2: np.ndarray, angle_rad: np.ndarray | None, half_n: np.ndarray) -> np.ndarray:
+def _up_in_sensor(acc_mps2: np.ndarray, angle_rad: np.ndarray | None, width_n: np.ndarray) -> np.ndarray:
     """Unit up direction in the sensor frame per sample: the accelerometer's mean direction over a window of
-    ``2 half_n + 1`` samples (a whole stride: the gait's periodic accelerations cancel), turned by the gyroscope's
+    ``width_n`` samples (a whole stride: the gait's periodic accelerations cancel), turned by the gyroscope's
     integrated rate ``angle_rad`` about its mean over the same window (small angles: ``u(t) = u_mean - theta x
     u_mean``)."""
-    up = _window_mean(acc_mps2, half_n)
+    up = _window_mean(acc_mps2, width_n)
     up /= np.maximum(np.linalg.norm(up, axis=1, keepdims=True), 1e-9)
     if angle_rad is not None:
-        up = up - np.cross(angle_rad - _window_mean(angle_rad, half_n), up)
+        up = up - np.cross(angle_rad - _window_mean(angle_rad, width_n), up)
         up /= np.maximum(np.linalg.norm(up, axis=1, keepdims=True), 1e-9)
     return up
 
@@ -225,7 +229,8 @@ def _complementary_speed(t_s: np.ndarray, a_fwd_mps2: np.ndarray, lever_mps: np.
         if r < 0 or i1 - i0 < 2:
             continue
         steps = np.flatnonzero(run == r)
-        v_int = np.cumsum(a_fwd_mps2[i0:i1]) / rate - lever_mps[i0:i1]
+        a = a_fwd_mps2[i0:i1]
+        v_int = (np.cumsum(a) - 0.5 * a) / rate - lever_mps[i0:i1]  # trapezoid: the velocity at the samples
         drift = v_int - np.interp(t_s[i0:i1], mid[steps], speed_mps[steps])
         out[i0:i1] = v_int - sosfiltfilt(sos, drift, padlen=min(i1 - i0 - 1, int(rate / SPEED_CROSSOVER_HZ)))
     ok = np.isfinite(out)
@@ -251,18 +256,20 @@ def trunk_motion(u: UniformImu, t_start_s: np.ndarray, t_end_s: np.ndarray, spee
     seg = np.where(u.valid[::every], seg, -1)
     bad = np.bincount(seg[seg >= 0], minlength=n) < 2
     acc = _lowpass(u.acc_mps2, u.rate_hz)[::every]
-    angle = None if u.gyr_radps is None else (np.cumsum(u.gyr_radps, axis=0) / u.rate_hz)[::every]
+    angle = None if u.gyr_radps is None else ((np.cumsum(u.gyr_radps, axis=0) - 0.5 * u.gyr_radps) / u.rate_hz)[::every]
     # the mean over one stride (a step each side) inside the steps, MEAN_TILT_WINDOW_S elsewhere
-    step_s = np.where(seg >= 0, (t_end_s - t_start_s)[np.maximum(seg, 0)], 0.5 * MEAN_TILT_WINDOW_S)
-    up = _up_in_sensor(acc, angle, np.round(step_s * rate).astype(int))
+    stride_s = np.where(seg >= 0, 2.0 * (t_end_s - t_start_s)[np.maximum(seg, 0)], MEAN_TILT_WINDOW_S)
+    up = _up_in_sensor(acc, angle, stride_s * rate)
     a_up = np.einsum("ij,ij->i", acc, up)
     a_h = acc - a_up[:, None] * up
 
     def detrended_double(a):
+        """Velocity half a sample after each sample and position at the samples (midpoint rule), both zero-mean
+        and equal at the step's ends."""
         a = a - _per_segment_mean(a, seg, n)[np.maximum(seg, 0)]
         v = _integrate_per_segment(a, seg, dt)
         v = v - _per_segment_mean(v, seg, n)[np.maximum(seg, 0)]
-        return v, _integrate_per_segment(v, seg, dt)
+        return v, _integrate_per_segment(v, seg, dt) - v * dt
 
     _, z = detrended_double(a_up)
     # forward axis: principal direction of the step-averaged horizontal acceleration (lateral cancels over L/R)
