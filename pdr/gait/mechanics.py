@@ -240,8 +240,8 @@ def _complementary_speed(t_s: np.ndarray, a_fwd_mps2: np.ndarray, lever_mps: np.
 
 def trunk_motion(u: UniformImu, t_start_s: np.ndarray, t_end_s: np.ndarray, speed_mps: np.ndarray,
                  sensor_above_hip_m: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Trunk height (m) and forward speed (m/s) of the hips, integrated within each step (module docstring), on the
-    IMU grid thinned to at least ``DECIMATED_RATE_FACTOR`` x the low-pass cutoff.
+    """Trunk height (m) and forward speed (m/s) of the hips (module docstring), on the IMU grid thinned to at least
+    ``DECIMATED_RATE_FACTOR`` x the low-pass cutoff.
 
     ``speed_mps``: the average speed of each step (its length over its duration). ``sensor_above_hip_m``: the lever
     arm whose rotation is removed from the forward speed (with a gyroscope). Returns ``(t_s, z_m, v_mps)``
@@ -256,7 +256,10 @@ def trunk_motion(u: UniformImu, t_start_s: np.ndarray, t_end_s: np.ndarray, spee
     seg = np.where(u.valid[::every], seg, -1)
     bad = np.bincount(seg[seg >= 0], minlength=n) < 2
     acc = _lowpass(u.acc_mps2, u.rate_hz)[::every]
-    angle = None if u.gyr_radps is None else ((np.cumsum(u.gyr_radps, axis=0) - 0.5 * u.gyr_radps) / u.rate_hz)[::every]
+    if u.gyr_radps is None:
+        angle = None
+    else:  # the integrated rate at each sample's own time (trapezoid rule)
+        angle = ((np.cumsum(u.gyr_radps, axis=0) - 0.5 * u.gyr_radps) / u.rate_hz)[::every]
     # the mean over one stride (a step each side) inside the steps, MEAN_TILT_WINDOW_S elsewhere
     stride_s = np.where(seg >= 0, 2.0 * (t_end_s - t_start_s)[np.maximum(seg, 0)], MEAN_TILT_WINDOW_S)
     up = _up_in_sensor(acc, angle, stride_s * rate)
@@ -364,7 +367,8 @@ def walking_bouts(steps: pd.DataFrame, *, placement: str, imu: UniformImu | None
     """``bouts.csv`` and the per-step mechanics (``STEP_COLUMNS``) of a steps table.
 
     ``steps``: ``t_s, bout_id, step_length_m`` (contacts, sorted). ``imu``: the main IMU on a uniform grid, used when
-    ``placement`` is a trunk placement (``sensor_above_hip_m``: its height above the hips); else ``gnss`` (``t_s, e_m, n_m, u_m, h_acc_m``) when fast and precise enough.
+    ``placement`` is a trunk placement (``sensor_above_hip_m``: its height above the hips, :func:`sensor_above_hip_m`);
+    else ``gnss`` (``t_s, e_m, n_m, u_m, h_acc_m``) when fast and precise enough.
     Warnings (once each): no source of trunk motion, GNSS not usable, no body mass, bouts of one step.
     """
     missing = [c for c in ("t_s", "bout_id", "step_length_m") if c not in steps.columns]
