@@ -142,8 +142,7 @@ def run_closure(rec_dir: Path, out: Path, candidate: str | None = None) -> tuple
         config = out.with_suffix(".toml")
         config.write_text("[foot.zero_velocity]\n" + "".join(f"{k} = {v!r}\n" for k, v in zv.items())
                           + "[foot.zupt_ins]\n" + "".join(f"{k} = {v!r}\n" for k, v in ins.items()))
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+    with collect_warnings():
         run_recording(rec_dir, out, config_path=config, force=True)
     traj = pd.read_csv(out / "trajectory.csv")
     xy = traj[["e_m", "n_m"]].to_numpy()

@@ -552,8 +552,7 @@ def test_walking_forms_learnt_at_204_8_hz_name_the_walk_alike_at_102_4_hz(gaitma
     from pdr.gait.forms import FourierGaitForms
     from pdr.pipelines.gait_forms import FOOT_N_FORMS, recording_cycles
 
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+    with collect_warnings():
         train = pd.concat([recording_cycles(r, {}) for r in gaitmap_walk.values()], ignore_index=True)
         forms = FourierGaitForms(n_forms=FOOT_N_FORMS).fit(train)
         rec = gaitmap_walk["walk_2x20m"]

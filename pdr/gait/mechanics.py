@@ -17,17 +17,25 @@ the intervals between consecutive contacts of a bout, the first contact's step (
 
 Sources of the trunk's motion, in this order:
 
-1. a trunk IMU (placement ``waist`` or ``trunk``): vertical and forward displacement by double integration of the
-   earth-frame acceleration (low-passed at ``KINEMATICS_CUTOFF_HZ``, zero lag) within each step, drift removed
-   between contacts: the acceleration's mean over the step is removed (equal velocities at consecutive contacts),
-   then the velocity's (equal heights), as the drift removal of Zijlstra & Hof (2003, Gait & Posture 18:1-10) for
-   the trunk's vertical displacement, done per step. The vertical is the accelerometer's mean direction over a
-   stride (Moe-Nilssen 1998, Clin Biomech 13:320-327) turned by the gyroscope's integrated rate about its own mean
-   (small angles), so the trunk's pitch oscillation does not leak gravity into the forward acceleration. The forward axis is fixed on the trunk: the principal direction of the
+1. a trunk IMU (placement ``waist`` or ``trunk``), from the earth-frame acceleration low-passed at
+   ``KINEMATICS_CUTOFF_HZ`` (zero lag). The vertical is the accelerometer's mean direction over a whole stride
+   (Moe-Nilssen 1998, Clin Biomech 13:320-327; a stride cancels the gait's periodic accelerations) turned by the
+   gyroscope's integrated rate about its own mean (small angles), so the trunk's pitch oscillation does not leak
+   gravity into the forward acceleration. The forward axis is fixed on the trunk: the principal direction of the
    step-averaged horizontal acceleration in the sensor frame (the lateral acceleration changes sign with the stance
    leg and averages out), signed so that the forward speed is lowest when the trunk is highest (inverted pendulum:
-   kinetic and potential energy fluctuate in opposition, Cavagna et al. 1976). The average speed of each step is its
-   step length over its duration; the integration gives only its fluctuation.
+   kinetic and potential energy fluctuate in opposition, Cavagna et al. 1976).
+
+   - Height: double integration within each step, drift removed between contacts: the acceleration's mean over the
+     step is removed (equal vertical velocities at consecutive contacts), then the velocity's (equal heights), the
+     drift removal of Zijlstra & Hof (2003, Gait & Posture 18:1-10) for the trunk's vertical displacement, per step.
+   - Forward speed: a complementary filter (Higgins 1975): below ``SPEED_CROSSOVER_HZ`` the step speeds (step length
+     over duration), above it the integrated forward acceleration, so the speed may change from one step to the
+     next; each step's mean is then its step speed. The sensor rides on the lower back, above the hip joints, and
+     the pelvis pitches twice per stride: the sensor's velocity is the hips' plus the lever arm's rotation,
+     ``v_sensor = v_hip + omega x r`` (rigid-body kinematics), so ``omega x r`` is removed along the forward axis,
+     with ``omega`` the gyroscope's rate (low-passed as the acceleration) and ``r`` the sensor's height above the
+     hips (:func:`sensor_above_hip_m`) along the up direction.
 2. GNSS with a high rate and centimetre precision (the seed: DGPS at 5 Hz): heights and horizontal speed from the
    fixes, linearly interpolated between fixes. Fixes slower than ``MIN_GNSS_RATE_HZ``, without an altitude or with a
    median ``h_acc_m`` above ``MAX_GNSS_H_ACC_M`` (or none) are not used (said once).
@@ -44,7 +52,8 @@ from scipy.signal import butter, sosfiltfilt
 
 from pdr.constants import GRAVITY_MPS2
 from pdr.errors import InputError, warn
-from pdr.signals.resample import UniformImu, moving_average
+from pdr.signals.resample import UniformImu
+from pdr.step_length.models import LEG_LENGTH_PER_HEIGHT
 
 BOUT_COLUMNS = ("bout_id", "t_start_s", "t_end_s", "n_steps", "distance_m", "speed_mps", "cadence_spm", "step_length_m",
                 "step_length_cv", "vertical_lift_m", "speed_variation_mps", "power_gravity_w", "power_inertia_w",
@@ -58,8 +67,9 @@ GNSS_GRID_HZ = 50.0  # the fixes are interpolated onto this grid to be cut at th
 MISSED_CONTACT_RATIO = 1.6  # a step interval this many times the bout's median spans a missed contact: no mechanics
 KINEMATICS_CUTOFF_HZ = 10.0  # five harmonics of a fast cadence (2 steps/s): the gait's trunk motion; noise above
 DECIMATED_RATE_FACTOR = 5.0  # the low-passed signals are integrated at >= 5 x the cutoff (every k-th sample)
-MEAN_TILT_WINDOW_S = 2.0  # a whole stride even at 1 step/s: the gait's oscillation averages out of the mean direction
+MEAN_TILT_WINDOW_S = 2.0  # vertical window outside the steps: a whole stride even at 1 step/s
 WAVEFORM_BINS = 32  # phase bins of the step-averaged horizontal acceleration (forward axis)
+SPEED_CROSSOVER_HZ = 0.25  # half the left/right alternation of slow walking (1 step/s): step-to-step changes pass
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -94,7 +104,8 @@ def _per_segment_mean(x: np.ndarray, seg: np.ndarray, n: int) -> np.ndarray:
 
 
 def _integrate_per_segment(x: np.ndarray, seg: np.ndarray, dt_s: float) -> np.ndarray:
-    """Running integral of ``x`` restarting at 0 at the first sample of each segment (rectangle rule)."""
+    """Running integral of ``x`` restarting at 0 at the first sample of each segment (rectangle rule: the integral up
+    to half a sample after each sample)."""
     c = np.cumsum(x * dt_s)
     first = np.flatnonzero((seg >= 0) & np.r_[True, seg[1:] != seg[:-1]])
     base = np.zeros(len(x))
@@ -152,17 +163,41 @@ def step_energies(t_s: np.ndarray, z_m: np.ndarray, v_mps: np.ndarray, t_start_s
 # ----------------------------------------------------------------------------------------------------------------
 
 
-def _up_in_sensor(acc_mps2: np.ndarray, angle_rad: np.ndarray | None, rate_hz: float) -> np.ndarray:
-    """Unit up direction in the sensor frame per sample: the accelerometer's mean direction over
-    ``MEAN_TILT_WINDOW_S``, turned by the gyroscope's integrated rate ``angle_rad`` about its mean over the same window
-    (small angles: ``u(t) = u_mean - theta x u_mean``)."""
-    win = int(round(MEAN_TILT_WINDOW_S * rate_hz))
-    up = moving_average(acc_mps2, win, axis=0)
+def _window_mean(x: np.ndarray, width_n: np.ndarray) -> np.ndarray:
+    """Centred mean of ``x`` (N, 3) over a window of ``width_n[i]`` samples (fractional: the end samples weighted by
+    the part inside; shrinking at the ends of the record)."""
+    c = np.concatenate([np.zeros((1, x.shape[1])), np.cumsum(x, axis=0)])  # c[k]: sum of the first k samples
+    i = np.arange(len(x)) + 0.5  # sample i covers [i, i + 1) in c's index
+    lo, hi = np.clip(i - 0.5 * width_n, 0, len(x)), np.clip(i + 0.5 * width_n, 0, len(x))
+    k = np.arange(len(c))
+    return np.stack([np.interp(hi, k, c[:, j]) - np.interp(lo, k, c[:, j]) for j in range(x.shape[1])], 1) / \
+        (hi - lo)[:, None]
+
+
+def _up_in_sensor(acc_mps2: np.ndarray, angle_rad: np.ndarray | None, width_n: np.ndarray) -> np.ndarray:
+    """Unit up direction in the sensor frame per sample: the accelerometer's mean direction over a window of
+    ``width_n`` samples (a whole stride: the gait's periodic accelerations cancel), turned by the gyroscope's
+    integrated rate ``angle_rad`` about its mean over the same window (small angles: ``u(t) = u_mean - theta x
+    u_mean``)."""
+    up = _window_mean(acc_mps2, width_n)
     up /= np.maximum(np.linalg.norm(up, axis=1, keepdims=True), 1e-9)
     if angle_rad is not None:
-        up = up - np.cross(angle_rad - moving_average(angle_rad, win, axis=0), up)
+        up = up - np.cross(angle_rad - _window_mean(angle_rad, width_n), up)
         up /= np.maximum(np.linalg.norm(up, axis=1, keepdims=True), 1e-9)
     return up
+
+
+def sensor_above_hip_m(subject: dict | None) -> float:
+    """Height of a trunk sensor above the hip joints from ``meta.toml`` ``[subject]``: ``sensor_height_m`` minus the
+    standing hip height (``leg_length_m``, else 0.53 ``height_m``: greater-trochanter height, Winter 2009). 0 without
+    ``sensor_height_m`` or a hip height (the sensor taken at the hips, as the inverted-pendulum step model takes it)
+    and where the sensor is measured below the hips."""
+    subject = subject or {}
+    sensor, leg, height = (subject.get(k) for k in ("sensor_height_m", "leg_length_m", "height_m"))
+    hip = leg if leg is not None else (LEG_LENGTH_PER_HEIGHT * height if height is not None else None)
+    if sensor is None or hip is None:
+        return 0.0
+    return max(float(sensor) - float(hip), 0.0)
 
 
 def _lowpass(x: np.ndarray, rate_hz: float) -> np.ndarray:
@@ -173,12 +208,41 @@ def _lowpass(x: np.ndarray, rate_hz: float) -> np.ndarray:
     return sosfiltfilt(sos, x, axis=0)
 
 
-def trunk_motion(u: UniformImu, t_start_s: np.ndarray, t_end_s: np.ndarray, speed_mps: np.ndarray
-                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Trunk height (m) and forward speed (m/s), integrated within each step (module docstring), on the IMU grid
-    thinned to at least ``DECIMATED_RATE_FACTOR`` x the low-pass cutoff.
+def _complementary_speed(t_s: np.ndarray, a_fwd_mps2: np.ndarray, lever_mps: np.ndarray, seg: np.ndarray,
+                         t_start_s: np.ndarray, t_end_s: np.ndarray, speed_mps: np.ndarray) -> np.ndarray:
+    """Forward speed of the hips per sample: the step speeds below ``SPEED_CROSSOVER_HZ`` and the integrated forward
+    acceleration minus the lever arm's velocity ``lever_mps`` above (a complementary filter, Higgins 1975, IEEE Trans.
+    Aerosp. Electron. Syst. 11:321-325), over each run of consecutive steps; then each step's mean is set to its step
+    speed. NaN outside the steps."""
+    n = len(t_start_s)
+    rate = 1.0 / (t_s[1] - t_s[0])
+    mid = 0.5 * (t_start_s + t_end_s)
+    run = np.cumsum(np.r_[True, t_start_s[1:] != t_end_s[:-1]]) - 1  # consecutive steps share a contact
+    label = np.where(seg >= 0, run[np.maximum(seg, 0)], -1)
+    edges = np.flatnonzero(np.diff(np.r_[-2, label, -2]))  # blocks of samples with one run label
+    sos = butter(2, SPEED_CROSSOVER_HZ, btype="low", fs=rate, output="sos")
+    out = np.full(len(t_s), np.nan)
+    for i0, i1 in zip(edges[:-1], edges[1:]):
+        r = label[i0]
+        if r < 0 or i1 - i0 < 2:
+            continue
+        steps = np.flatnonzero(run == r)
+        a = a_fwd_mps2[i0:i1]
+        v_int = (np.cumsum(a) - 0.5 * a) / rate - lever_mps[i0:i1]  # trapezoid: the velocity at the samples
+        drift = v_int - np.interp(t_s[i0:i1], mid[steps], speed_mps[steps])
+        out[i0:i1] = v_int - sosfiltfilt(sos, drift, padlen=min(i1 - i0 - 1, int(rate / SPEED_CROSSOVER_HZ)))
+    ok = np.isfinite(out)
+    mean = np.bincount(seg[ok], weights=out[ok], minlength=n) / np.maximum(np.bincount(seg[ok], minlength=n), 1)
+    return out - mean[np.maximum(seg, 0)] + speed_mps[np.maximum(seg, 0)]
 
-    ``speed_mps``: the average speed of each step (its length over its duration). Returns ``(t_s, z_m, v_mps)``
+
+def trunk_motion(u: UniformImu, t_start_s: np.ndarray, t_end_s: np.ndarray, speed_mps: np.ndarray,
+                 sensor_above_hip_m: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Trunk height (m) and forward speed (m/s) of the hips (module docstring), on the IMU grid thinned to at least
+    ``DECIMATED_RATE_FACTOR`` x the low-pass cutoff.
+
+    ``speed_mps``: the average speed of each step (its length over its duration). ``sensor_above_hip_m``: the lever
+    arm whose rotation is removed from the forward speed (with a gyroscope). Returns ``(t_s, z_m, v_mps)``
     restricted to the samples inside the steps (and valid).
     """
     n = len(t_start_s)
@@ -190,16 +254,23 @@ def trunk_motion(u: UniformImu, t_start_s: np.ndarray, t_end_s: np.ndarray, spee
     seg = np.where(u.valid[::every], seg, -1)
     bad = np.bincount(seg[seg >= 0], minlength=n) < 2
     acc = _lowpass(u.acc_mps2, u.rate_hz)[::every]
-    angle = None if u.gyr_radps is None else (np.cumsum(u.gyr_radps, axis=0) / u.rate_hz)[::every]
-    up = _up_in_sensor(acc, angle, rate)
+    if u.gyr_radps is None:
+        angle = None
+    else:  # the integrated rate at each sample's own time (trapezoid rule)
+        angle = ((np.cumsum(u.gyr_radps, axis=0) - 0.5 * u.gyr_radps) / u.rate_hz)[::every]
+    # the mean over one stride (a step each side) inside the steps, MEAN_TILT_WINDOW_S elsewhere
+    stride_s = np.where(seg >= 0, 2.0 * (t_end_s - t_start_s)[np.maximum(seg, 0)], MEAN_TILT_WINDOW_S)
+    up = _up_in_sensor(acc, angle, stride_s * rate)
     a_up = np.einsum("ij,ij->i", acc, up)
     a_h = acc - a_up[:, None] * up
 
     def detrended_double(a):
+        """Velocity half a sample after each sample and position at the samples (midpoint rule), both zero-mean
+        and equal at the step's ends."""
         a = a - _per_segment_mean(a, seg, n)[np.maximum(seg, 0)]
         v = _integrate_per_segment(a, seg, dt)
         v = v - _per_segment_mean(v, seg, n)[np.maximum(seg, 0)]
-        return v, _integrate_per_segment(v, seg, dt)
+        return v, _integrate_per_segment(v, seg, dt) - v * dt
 
     _, z = detrended_double(a_up)
     # forward axis: principal direction of the step-averaged horizontal acceleration (lateral cancels over L/R)
@@ -209,10 +280,15 @@ def trunk_motion(u: UniformImu, t_start_s: np.ndarray, t_end_s: np.ndarray, spee
     b = np.clip((phase * WAVEFORM_BINS).astype(int), 0, WAVEFORM_BINS - 1)[ok]
     wave = np.stack([np.bincount(b, weights=a_hc[ok, i], minlength=WAVEFORM_BINS) for i in range(3)], 1)
     fwd = np.linalg.svd(wave, full_matrices=False)[2][0]
-    dv, _ = detrended_double(a_h @ fwd)
+    a_fwd = a_h @ fwd
+    lever = np.zeros(len(t_s))  # the velocity of the sensor about the hips, omega x r, along the forward axis
+    if u.gyr_radps is not None and sensor_above_hip_m > 0:
+        lever = np.cross(_lowpass(u.gyr_radps, u.rate_hz)[::every], sensor_above_hip_m * up) @ fwd
+    dv, _ = detrended_double(a_fwd)
+    dv -= lever - _per_segment_mean(lever, seg, n)[np.maximum(seg, 0)]
     if np.sum(dv[ok] * z[ok]) > 0:  # forward speed lowest when the trunk is highest
-        dv = -dv
-    v = np.asarray(speed_mps, float)[np.maximum(seg, 0)] + dv
+        a_fwd, lever = -a_fwd, -lever
+    v = _complementary_speed(t_s, a_fwd, lever, seg, t_start_s, t_end_s, np.asarray(speed_mps, float))
     keep = ok & ~bad[np.maximum(seg, 0)]
     return t_s[keep], z[keep], v[keep]
 
@@ -284,12 +360,13 @@ def bout_table(steps: pd.DataFrame, step_mech: pd.DataFrame) -> pd.DataFrame:
 
 
 def walking_bouts(steps: pd.DataFrame, *, placement: str, imu: UniformImu | None = None,
-                  gnss: pd.DataFrame | None = None, mass_kg: float | None = None,
+                  gnss: pd.DataFrame | None = None, mass_kg: float | None = None, sensor_above_hip_m: float = 0.0,
                   what: str = "recording") -> tuple[pd.DataFrame, pd.DataFrame]:
     """``bouts.csv`` and the per-step mechanics (``STEP_COLUMNS``) of a steps table.
 
     ``steps``: ``t_s, bout_id, step_length_m`` (contacts, sorted). ``imu``: the main IMU on a uniform grid, used when
-    ``placement`` is a trunk placement; else ``gnss`` (``t_s, e_m, n_m, u_m, h_acc_m``) when fast and precise enough.
+    ``placement`` is a trunk placement (``sensor_above_hip_m``: its height above the hips, :func:`sensor_above_hip_m`);
+    else ``gnss`` (``t_s, e_m, n_m, u_m, h_acc_m``) when fast and precise enough.
     Warnings (once each): no source of trunk motion, GNSS not usable, no body mass, bouts of one step.
     """
     missing = [c for c in ("t_s", "bout_id", "step_length_m") if c not in steps.columns]
@@ -310,7 +387,7 @@ def walking_bouts(steps: pd.DataFrame, *, placement: str, imu: UniformImu | None
     usable, why = gnss_usable(gnss)
     if len(k) and trunk:
         source = "trunk_imu"
-        motion = trunk_motion(imu, t0, t1, step_mech["speed_mps"].to_numpy())
+        motion = trunk_motion(imu, t0, t1, step_mech["speed_mps"].to_numpy(), sensor_above_hip_m)
     elif len(k) and usable:
         source = "gnss"
         motion = gnss_motion(gnss)
