@@ -231,6 +231,14 @@ def _humolire_rows(tmp: Path) -> list[dict]:
             rows.append(_row(case, "distance error", round(100.0 * (after / dist2 - 1.0), 1), "%", target, anchor))
             rows.append(_row(case.split(":")[0] + ": lap 2, uncalibrated", "distance error",
                              round(100.0 * (before / dist2 - 1.0), 1), "%", "reference point", anchor))
+            lap1_after = akf.model_.estimate(steps[sel1], rec.subject).step_length_m_.sum()
+            rows.append(_row(case.split(":")[0] + ": lap 1 itself after calibrating on it (in-sample: what the fit "
+                             "learnt)", "distance error", round(100.0 * (lap1_after / known["distance_m"].sum() - 1.0), 1),
+                             "%", "reference point", anchor))
+        rows.append(_row("[test] HuMoLiRe phone in hand: the walker's measured mean step, lap 2 against lap 1 (landmark "
+                         "distance / detected steps), and the change of cadence", "change of step; of cadence",
+                         f"{100.0 * (lap_steps[1] / lap_steps[0] - 1.0):+.1f}; {100.0 * (freqs[1] / freqs[0] - 1.0):+.1f}",
+                         "%", "reference point", anchor))
     return rows
 
 
