@@ -220,8 +220,8 @@ def test_wavelet_impaired_slow_walker_recall():
 
 
 def test_wavelet_no_steps_swaying_at_rest():
-    """Standing with trunk sway at a slow, step-like rhythm (0.1 m/s2 at 1.2 Hz, above the 0.04 m/s2 RMS of quiet
-    standing) and sensor noise: below the scaled rest threshold of that cadence (0.13 m/s2), so no steps."""
+    """Standing with trunk sway at a slow, step-like rhythm (0.1 m/s2 at 1.2 Hz, four times what a lower back reads at
+    rest in mobgap) and sensor noise: below the scaled rest threshold of that cadence (0.13 m/s2), so no steps."""
     rng = np.random.default_rng(5)
     t = np.arange(0, 40, 0.01)
     acc = np.column_stack([np.zeros_like(t), np.zeros_like(t), np.full_like(t, GRAVITY_MPS2)])
