@@ -155,23 +155,26 @@ def _person_scenario(height_m: float, cohort: str, speeds: tuple[float, ...]) ->
             "segment": segments, "gnss": {"enabled": False}}
 
 
-def _person_errors(height_m: float, cohort: str, seed: int, speeds: tuple[float, ...]) -> tuple[float, float, float]:
+def _person_errors(height_m: float, cohort: str, seed: int,
+                   speeds: tuple[float, ...]) -> tuple[float, float, float, float]:
     """Uncalibrated distance error (%) of one simulated person: detected steps x body-based lengths against the true
-    distance; the same on the detected steps matched to true ones (length only); the detected / true step count."""
+    distance; the same on the detected steps matched to true ones (length only); the detected / true step count; the
+    person's pelvis arc gain (vertical excursion / compass-gait arc, which the pendulum model reads as length)."""
     from pdr.sim import simulate
 
     rec = simulate(_person_scenario(height_m, cohort, speeds), seed)
     steps = detect_steps(rec, {})
     ref = rec.reference["steps"]
+    gain = float(rec.reference["summary"]["pelvis_arc_gain"])
     if len(steps) == 0:
-        return -100.0, np.nan, 0.0
+        return -100.0, np.nan, 0.0, gain
     model, _ = body_model(rec.subject, rec.placement)
     length = model.estimate(model.prepare(steps, rec), rec.subject).step_length_m_
     truth = _true_lengths(steps, ref)
     ok = np.isfinite(truth)
     total = 100.0 * (length.sum() / ref["step_length_m"].sum() - 1.0)
     matched = 100.0 * (length[ok].sum() / truth[ok].sum() - 1.0) if ok.any() else np.nan
-    return total, matched, len(steps) / len(ref)
+    return total, matched, len(steps) / len(ref), gain
 
 
 def _people_rows(quick: bool) -> list[dict]:
@@ -187,7 +190,8 @@ def _people_rows(quick: bool) -> list[dict]:
             res = np.array([_person_errors(height, cohort, s, speeds) for s in group_seeds])
             case = (f"{tag} simulated {cohort} people of {height:.2f} m, waist, {len(group_seeds)} people (seeds "
                     f"{group_seeds[0]}-{group_seeds[-1]}), bouts of {BOUT_S:.0f} s at {', '.join(f'{v:g}' for v in speeds)} m/s, "
-                    f"body-based default; per person {', '.join(f'{e:+.1f}' for e in res[:, 0])}")
+                    f"body-based default; per person {', '.join(f'{e:+.1f}' for e in res[:, 0])} "
+                    f"(pelvis arc gain {', '.join(f'{g:.3f}' for g in res[:, 3])})")
             rows.append(_row(case, "distance error of the group (mean of people); worst person", 
                              f"{np.mean(res[:, 0]):+.1f}; {res[np.argmax(np.abs(res[:, 0])), 0]:+.1f}", "%", "<= 5%", anchor))
             rows.append(_row(case, "same on matched steps (length only); detected / true steps",
@@ -197,7 +201,7 @@ def _people_rows(quick: bool) -> list[dict]:
 
 # ------------------------------------------------------------------------------------------------ HuMoLiRe phone walk
 def _humolire_rows(tmp: Path) -> list[dict]:
-    from pdr.calibration.segments import landmark_distances
+    from pdr.calibration.segments import distance_segments, landmark_distances
 
     src = DATASETS / "humolire_phone_landmarks" / "data" / "imus" / "1" / "square_2x"
     rec = load_recording(import_recordings("humolire", src, tmp / "humolire")[0])
@@ -229,6 +233,26 @@ def _humolire_rows(tmp: Path) -> list[dict]:
             rows.append(_row(case, "distance error", round(100.0 * (after / dist2 - 1.0), 1), "%", target, anchor))
             rows.append(_row(case.split(":")[0] + ": lap 2, uncalibrated", "distance error",
                              round(100.0 * (before / dist2 - 1.0), 1), "%", "reference point", anchor))
+            if name.startswith("body"):  # Ladetto's forecast: the prior plus the filter's correction at the last step
+                k_end = int(np.flatnonzero(sel1)[-1])
+                correction = float(akf.trace_["step_length_m"].iloc[k_end] - akf.trace_["model_step_m"].iloc[k_end])
+                filtered = prior.estimate(steps[sel], rec.subject).step_length_m_.sum() + correction * sel.sum()
+                rows.append(_row(case.split(":")[0] + ": lap 2 with the adaptive filter's correction at the end of "
+                                 "lap 1 instead of the fitted model", "distance error",
+                                 round(100.0 * (filtered / dist2 - 1.0), 1), "%", "reference point", anchor))
+            lap1_after = akf.model_.estimate(steps[sel1], rec.subject).step_length_m_.sum()
+            rows.append(_row(case.split(":")[0] + ": lap 1 itself after calibrating on it (in-sample: what the fit "
+                             "learnt)", "distance error", round(100.0 * (lap1_after / known["distance_m"].sum() - 1.0), 1),
+                             "%", "reference point", anchor))
+        legs = distance_segments(steps, landmark_distances(lm, LANDMARK_H_ACC_M), min_segment_steps=1.0,
+                                 min_step_m=0.0, max_step_m=np.inf)
+        cadence = legs["n_steps"] / (legs["t_end_s"] - legs["t_start_s"])
+        per_leg = ", ".join(f"{m:.3f} m at {f:.2f}/s" for m, f in zip(legs["measured_step_m"], cadence))
+        rows.append(_row("[test] HuMoLiRe phone in hand: the walker's measured mean step, lap 2 against lap 1 (landmark "
+                         f"distance / detected steps), and the change of cadence; per landmark leg {per_leg}",
+                         "change of step; of cadence",
+                         f"{100.0 * (lap_steps[1] / lap_steps[0] - 1.0):+.1f}; {100.0 * (freqs[1] / freqs[0] - 1.0):+.1f}",
+                         "%", "reference point", anchor))
     return rows
 
 

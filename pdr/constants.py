@@ -6,6 +6,7 @@ Quaternions are named with their order (``q_wxyz``).
 
 GRAVITY_MPS2 = 9.80665  # standard gravity
 EARTH_RADIUS_M = 6_378_137.0  # WGS-84 semi-major axis
+REFERENCE_CADENCE_HZ = 110.0 / 60.0  # a normal adult cadence (100-120 steps/min)
 
 # Gait from the trunk's vertical specific force (in g). Walking is an inverted pendulum: the trunk vaults over the
 # stance leg and its vertical specific force bottoms out at g (1 - v^2 / (g L)), about 0.5 g at the walk-run

@@ -25,6 +25,7 @@ import numpy as np
 import pandas as pd
 
 from pdr.base import Algorithm
+from pdr.constants import REFERENCE_CADENCE_HZ
 from pdr.errors import InputError, warn
 from pdr.io.recording import Recording
 from pdr.step_length.features import with_signal_features
@@ -34,7 +35,6 @@ LEG_LENGTH_PER_HEIGHT = 0.53  # greater-trochanter height / body height (Winter,
 MAX_FREQ_HZ = 6.0  # faster than any human cadence: the column is not a step frequency in Hz
 POPULATION_HEIGHT_M = 1.70  # adult stature, both sexes (NCD-RisC 2016, Europe / North America: men ~1.77, women ~1.64)
 HEIGHT_STEP_RATIO = 0.414  # step length / body height at a normal cadence (pedometer rule: 0.415 men, 0.413 women)
-REFERENCE_CADENCE_HZ = 110.0 / 60.0  # a normal adult cadence (100-120 steps/min)
 LEVEL_REL_STD = 0.08  # prior spread of a person's step length at a given height and cadence
 SLOPE_REL_STD = 0.30  # prior spread of the cadence slope, relative to its value
 

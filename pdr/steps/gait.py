@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from pdr.constants import REFERENCE_CADENCE_HZ
 from pdr.signals.resample import runs
 
 SUBHARMONIC_RATIO = 0.5  # the first acf peak at least this fraction of the best one is the fundamental period
@@ -72,11 +73,34 @@ def step_period_from_acf(acf: np.ndarray, rate_hz: float, min_step_s: float, max
     return (period / 2 if is_stride else period), best
 
 
+def rest_threshold_mps2(min_acc_std_mps2: float, step_s) -> np.ndarray:
+    """The standard deviation of |a| below which walking at the step period ``step_s`` (s) is taken for rest:
+    ``min_acc_std_mps2`` at a normal cadence (``f_ref`` = :data:`pdr.constants.REFERENCE_CADENCE_HZ`) and faster,
+    ``(f / f_ref)^2`` of it below.
+
+    The step-periodic part of a trunk sensor's |a| is mainly the vertical acceleration of the centre of mass, which
+    rises and falls once per step: an excursion ``dh`` (peak to peak) at a step frequency ``f`` gives an amplitude
+    ``dh / 2 (2 pi f)^2``. A threshold fixed in m/s2 therefore asks a slow walker for a larger excursion than a normal
+    one; scaled by ``f^2`` it asks everyone for the same, ``2 sqrt(2) 0.3 / (2 pi 1.83)^2 = 6.4 mm`` for 0.3 m/s2 at
+    110 steps/min: a quarter of the 2.7 cm measured at 0.7 m/s (Orendurff et al. 2004, "The effect of walking speed
+    on center of mass displacement", J Rehabil Res Dev 41:829-834). Slow walkers (0.5-0.9 m/s with steps of
+    0.4-0.6 m; shorter steps and slower gait in multiple sclerosis: Comber, Galvin & Coote 2017, Gait Posture
+    51:25-35) step at 1.2-1.5 steps/s, where the threshold is 0.13-0.2 m/s2; at the slowest step rate of the
+    detectors (1 step/s) it is 0.09 m/s2. A lower-back sensor at rest reads 0.02-0.03 m/s2 (mobgap daily-living
+    recording of participant 002, 5 s windows at least 5 s from any reference contact: median 0.026), but other
+    movement than walking reads more (participant 001: median 0.26), so the detectors keep the periodicity test
+    and, where the cadence is not measured, the unscaled threshold.
+    """
+    f = 1.0 / np.asarray(step_s, float)
+    return min_acc_std_mps2 * np.minimum(1.0, (f / REFERENCE_CADENCE_HZ) ** 2)
+
+
 def walking_mask(x: np.ndarray, rate_hz: float, *, window_s: float, min_step_s: float, max_step_s: float,
                  min_acc_std_mps2: float, min_periodicity: float, stride_check: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """Per-sample walking flag and step period (s, NaN where not walking) of a signal (the acceleration norm).
 
-    Windows of ``window_s`` with a hop of a quarter window; each window decides for its central hop.
+    Windows of ``window_s`` with a hop of a quarter window; each window decides for its central hop. A window is
+    at rest when its |a| standard deviation is below :func:`rest_threshold_mps2` at its step period.
     """
     n = len(x)
     win = int(round(window_s * rate_hz))
@@ -87,11 +111,12 @@ def walking_mask(x: np.ndarray, rate_hz: float, *, window_s: float, min_step_s: 
     if n < win or max_lag < 2:
         return walking, period
     starts, acf, std = window_acf(x, win, hop, max_lag)
+    lowest = float(rest_threshold_mps2(min_acc_std_mps2, max_step_s))
     for s, a, sd in zip(starts, acf, std):
-        if sd < min_acc_std_mps2:
+        if sd < lowest:
             continue
         p, strength = step_period_from_acf(a, rate_hz, min_step_s, max_step_s, stride_check)
-        if not np.isfinite(p) or strength < min_periodicity:
+        if not np.isfinite(p) or strength < min_periodicity or sd < rest_threshold_mps2(min_acc_std_mps2, p):
             continue
         c0 = s + (win - hop) // 2
         lo = 0 if s == starts[0] else c0

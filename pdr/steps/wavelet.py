@@ -12,7 +12,7 @@ from pdr.base import Algorithm
 from pdr.errors import InputError, warn
 from pdr.signals.attitude import gravity_direction_lowpass
 from pdr.signals.resample import UniformImu, moving_average, uniform_imu
-from pdr.steps.gait import bouts_from_mask, core_walking, walking_mask
+from pdr.steps.gait import bouts_from_mask, core_walking, rest_threshold_mps2, walking_mask
 
 STEP_COLUMNS = ["t_s", "bout_id"]
 BOUT_COLUMNS = ["bout_id", "t_start_s", "t_end_s", "step_period_s", "n_steps"]
@@ -105,9 +105,12 @@ class WaveletStepDetection(Algorithm):
         floor of 1 step/s keeps the longest step shorter than a normal stride (about 1.1 s), so a thigh sensor's
         stride period is never taken for a step (with 0.5 steps/s and an 8 s window, Oxford back pocket lost 12%).
     bout_window_s : window of the walking-bout detector (about two strides at the slowest cadence, and more).
-    min_acc_std_mps2 : below this standard deviation of |a| a window is at rest. A waist sensor sees 0.4 m/s2 at
-        0.6 m/s but 0.2-0.3 m/s2 at 0.4-0.5 m/s (simulator), so slower walking is taken for rest; 0.15 would find it
-        but admits daily-living movement that is not walking (mobgap: whole-recording IC F1 0.71 -> 0.69).
+    min_acc_std_mps2 : below this standard deviation of |a| a window (and a step) at a normal cadence is at rest;
+        at a slower cadence the threshold falls with the square of the step frequency, asking every walker for the
+        same vertical excursion of the centre of mass (:func:`pdr.steps.gait.rest_threshold_mps2`). A waist sensor
+        sees 0.3-0.4 m/s2 at 0.5 m/s and 1.3 steps/s (simulated impaired walkers), which a fixed 0.3 took for rest
+        in every other window; a fixed 0.15 finds them but admits daily-living movement that is not walking
+        (mobgap: whole-recording IC F1 0.71 -> 0.69).
     min_periodicity : a walking window's autocorrelation at the gait period is at least this.
     min_bout_steps : shorter walking runs are not walking (a turn on the spot, handling the phone).
     min_peak_ratio : a maximum smaller than this fraction of its neighbours' maxima is not a step (see
@@ -266,7 +269,11 @@ class WaveletStepDetection(Algorithm):
         # the rest test of the bout detector, per step: |a| must vary around the contact. At the edges of walking
         # (starting, stopping, quiet standing next to a bout) over the step itself; inside the core of walking over
         # the stride around it (both feet's contacts), so that a slow, light step (0.6 m/s: |a| std 0.2-0.4 m/s2 from
-        # step to step) is not taken for rest, while a pause of a few steps inside a bout still is.
+        # step to step) is not taken for rest, while a pause of a few steps inside a bout still is. In the core the
+        # step period is the walker's cadence and the threshold scales with it (:func:`rest_threshold_mps2`); at the
+        # edges the period is borrowed from the walking next to them (handling, turning and shuffling of daily
+        # living pass the scaled threshold there: mobgap whole-recording IC F1 0.71 -> 0.69), so the threshold of a
+        # normal cadence holds.
         in_core = core[np.clip(np.round((tb - core_t0_s) * u.rate_hz).astype(int), 0, len(core) - 1)]
         span = np.where(in_core, 1.0, 0.5) * step_s
         i0 = np.clip(np.round((tb - span - u.t_s[0]) * u.rate_hz).astype(int), 0, len(x) - 1)
@@ -274,7 +281,8 @@ class WaveletStepDetection(Algorithm):
         c1, c2 = sums
         cnt = np.maximum(i1 - i0, 1)
         var = (c2[i1] - c2[i0]) / cnt - ((c1[i1] - c1[i0]) / cnt) ** 2
-        return tb[var >= self.min_acc_std_mps2 ** 2]
+        gate = np.where(in_core, rest_threshold_mps2(self.min_acc_std_mps2, step_s), self.min_acc_std_mps2)
+        return tb[var >= gate ** 2]
 
     @staticmethod
     def _split_stops(t: np.ndarray, step_s: float, max_step_s: float) -> list[np.ndarray]:
