@@ -111,6 +111,27 @@ def test_oxford_optimisation_irregular_clock_passes(tmp_path):
     assert len(rec.imu) == 35236
 
 
+def test_foot_device_steps_make_the_feet_alternate():
+    from pdr.io.importers.oxford import foot_device_steps
+
+    right = np.array([0.0, 1.1, 2.2, 2.5, 3.3, 10.0])  # 2.5: the 2.2 contact bouncing; 10.0: after standing
+    left = np.array([0.55, 2.75, 10.6])  # the contact near 1.65 missed by the device
+    steps, dropped, added = foot_device_steps((right, left))
+    np.testing.assert_allclose(steps, [0.0, 0.55, 1.1, 1.65, 2.2, 2.75, 3.3, 10.0, 10.6])
+    assert (dropped, added) == (1, 1)
+    alternating = np.arange(20) * 0.5
+    assert len(foot_device_steps((alternating[::2], alternating[1::2]))[0]) == 20
+
+
+@pytest.mark.real_data("oxford_step_counter")
+def test_oxford_optimisation_foot_device_contacts_alternate(tmp_path):
+    paths, messages = _import("oxford", OXFORD / "optimisation" / "data" / "Samsung_Dario_Hard_FrontPocket_1", tmp_path)
+    summary = load_recording(paths[0]).reference["summary"]
+    assert summary["n_steps_device"] == 306  # upstream stats.csv
+    assert summary["n_steps"] == 306 - 6 + 15  # 6 bouncing contacts, 15 strides with the other foot's contact missed
+    assert any("6 bouncing contact(s) dropped, 15 missed" in m for m in messages)
+
+
 @pytest.fixture(scope="module")
 def mobgap_recs(tmp_path_factory):
     real_dataset("mobgap_lowerback_tvs_lab")
