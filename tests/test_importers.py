@@ -444,6 +444,67 @@ def test_other_apps_zip_mixed_exports_and_unknown_columns_refused(tmp_path, caps
     assert not (tmp_path / "out").exists()
 
 
+def _export(tmp_path: Path, parts: dict[str, str], drop: tuple[str, ...] = (), header: dict[str, str] | None = None) -> Path:
+    """A folder made of fixture exports: ``parts`` maps a subfolder ("" = the folder itself) to a fixture, ``drop``
+    removes files, ``header`` replaces a file's content."""
+    src = tmp_path / "export"
+    for sub, fixture in parts.items():
+        shutil.copytree(HAND / fixture, src / sub, dirs_exist_ok=True)
+    for name in drop:
+        (src / name).unlink()
+    for name, text in (header or {}).items():
+        (src / name).write_text(text)
+    return src
+
+
+BAD_EXPORTS = {
+    "sensorlogger no accelerometer": ("sensorlogger", {"": "sensorlogger_android"},
+                                      ("Accelerometer.csv", "TotalAcceleration.csv", "Gravity.csv"), None,
+                                      ("export", "expected a Sensor Logger export with Accelerometer.csv", "Gyroscope.csv")),
+    "phyphox no accelerometer": ("phyphox", {"": "phyphox_multi"}, ("Accelerometer.csv", "Linear Accelerometer.csv"), None,
+                                 ("export", "expected a phyphox export with acceleration including gravity", "Gyroscope.csv")),
+    "sensorlogger given phyphox's zip": ("sensorlogger", {"": "phyphox_multi"}, (), None,
+                                         ("export.zip", "expected a Sensor Logger export, found a phyphox export",
+                                          "pdr import phyphox")),
+    "phyphox given sensor logger's zip": ("phyphox", {"": "sensorlogger_android"}, (), None,
+                                          ("export.zip", "expected a phyphox export, found a Sensor Logger export",
+                                           "pdr import sensorlogger")),
+    "sensorlogger two exports": ("sensorlogger", {"a": "sensorlogger_android", "b": "sensorlogger_ios"}, (), None,
+                                 ("export", "expected one Sensor Logger export, found 2 (a, b)")),
+    "phyphox two exports": ("phyphox", {"a": "phyphox_multi", "b": "phyphox_custom"}, (), None,
+                            ("export", "expected one phyphox export, found 2 (a, b)")),
+    "sensorlogger files mixed with phyphox's": ("sensorlogger", {"": "sensorlogger_ios", "x": "phyphox_multi"}, (), None,
+                                                ("export", "expected one export per folder", "Pressure.csv")),
+    "phyphox files mixed with sensor logger's": ("phyphox", {"": "phyphox_custom", "x": "sensorlogger_ios"}, (), None,
+                                                 ("export", "expected one export per folder", "Gravity.csv")),
+    "sensorlogger unknown columns": ("sensorlogger", {"": "sensorlogger_android"}, (),
+                                     {"TotalAcceleration.csv": "when,a,b,c\n1,2,3,4\n"},
+                                     ("TotalAcceleration.csv", "expected Sensor Logger columns time, x, y, z", "when, a, b, c")),
+    "phyphox unknown columns": ("phyphox", {"": "phyphox_multi"}, (), {"Accelerometer.csv": "when,a,b,c\n1,2,3,4\n"},
+                                ("Accelerometer.csv", "expected phyphox columns", "when, a, b, c")),
+}
+
+
+@pytest.mark.parametrize("case", list(BAD_EXPORTS))
+def test_bad_phone_exports_one_error_line_naming_the_file_nothing_written(tmp_path, capsys, case):
+    """Each bad input of a phone export, through ``main(argv)``: one ``error:`` line naming the user's file or
+    folder and what was expected, exit 1, no output folder."""
+    fmt, parts, drop, header, words = BAD_EXPORTS[case]
+    src = _export(tmp_path, parts, drop, header)
+    if "zip" in case:
+        src = _zip_folder(src, tmp_path / "export.zip")
+    if "mixed" in case:  # the other app's files copied into the export folder itself
+        for p in sorted((src / "x").iterdir()):
+            if p.is_file() and not (src / p.name).exists():
+                shutil.move(p, src / p.name)
+        shutil.rmtree(src / "x")
+    rc, out, err = _cli(["import", fmt, src, tmp_path / "out"], capsys)
+    _assert_one_error(rc, err)
+    for w in words:
+        assert w in err, (w, err)
+    assert not (tmp_path / "out").exists() and out == ""
+
+
 def test_sensorlogger_without_gravity_is_refused(tmp_path):
     src = tmp_path / "export"
     shutil.copytree(HAND / "sensorlogger_ios", src)
