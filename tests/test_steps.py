@@ -328,13 +328,15 @@ def test_phone_handling_at_the_bout_edges_is_left_out():
     for (a, b), (c, d) in zip(truth, found[["t_start_s", "t_end_s"]].to_numpy()):
         assert c < b and d > a  # overlapping the true move
     n_true = len(rec.reference["steps"])
-    kept = WaveletStepDetection().detect(rec.imu)
-    counted_all = len(WaveletStepDetection(leave_out_handling=False).detect(rec.imu).steps_)
+    kept = WaveletStepDetection(leave_out_handling=True).detect(rec.imu)
+    counted_all = len(WaveletStepDetection().detect(rec.imu).steps_)
     assert counted_all >= n_true + 4  # the hand's movements taken for steps
     assert abs(len(kept.steps_) - n_true) <= 1
     t = kept.steps_["t_s"].to_numpy()
     assert not any(((t > a) & (t < b)).any() for a, b in truth)
     pd.testing.assert_frame_equal(kept.handling_, found)
+    assert len(detect_steps(rec, {})) == len(kept.steps_)  # on for a phone in the hand
+    assert make_detector(None, "waist").leave_out_handling is False  # a strapped sensor is not handled
 
 
 def test_phone_handled_while_walking_on_keeps_its_steps():
@@ -345,9 +347,9 @@ def test_phone_handled_while_walking_on_keeps_its_steps():
           "imu": [{"placement": "hand", "rate_hz": 100.0, "handling_s": 2.0, "in_pocket_s": [[0.0, 7.0], [17.0, 30.0]]}],
           "gnss": {"enabled": False}}
     rec = simulate(sc, seed=104)
-    det = WaveletStepDetection().detect(rec.imu)
+    det = WaveletStepDetection(leave_out_handling=True).detect(rec.imu)
     assert len(det.handling_) >= 2  # both moves seen
-    assert len(det.steps_) == len(WaveletStepDetection(leave_out_handling=False).detect(rec.imu).steps_)
+    assert len(det.steps_) == len(WaveletStepDetection().detect(rec.imu).steps_)
     assert abs(len(det.steps_) - len(rec.reference["steps"])) <= 2
 
 

@@ -27,12 +27,14 @@ def empty_steps_table() -> pd.DataFrame:
 
 
 TRUNK_PLACEMENTS = ("waist", "trunk", "head")  # sensors that see every step: the gait period is never a stride
+PHONE_PLACEMENTS = ("hand", "pocket", "bag", "arm", "neck", "unknown")  # where a phone is carried, taken out, put away
 
 
 def make_detector(section: dict | None, placement: str = "unknown"):
     """The ``[steps]`` section: ``method = "wavelet" | "peak"`` (default wavelet) plus that detector's parameters.
 
-    For a trunk placement the wavelet detector's ``stride_check`` defaults to False (unless the section sets it).
+    For a trunk placement the wavelet detector's ``stride_check`` defaults to False, and for a phone placement its
+    ``leave_out_handling`` to True (a strapped sensor is not handled), unless the section sets them.
     """
     section = dict(section or {})
     method = section.pop("method", "wavelet")
@@ -40,6 +42,8 @@ def make_detector(section: dict | None, placement: str = "unknown"):
         raise InputError(f"configuration [steps]: expected method one of {', '.join(DETECTORS)}, found {method!r}")
     if method == "wavelet" and placement in TRUNK_PLACEMENTS:
         section.setdefault("stride_check", False)
+    if method == "wavelet" and placement in PHONE_PLACEMENTS:
+        section.setdefault("leave_out_handling", True)
     return DETECTORS[method].from_config(section)
 
 

@@ -122,6 +122,8 @@ class WaveletStepDetection(Algorithm):
     leave_out_handling : maxima inside the phone's handling (:class:`pdr.steps.handling.AttitudeHandlingDetection`:
         taken out, put away, turned over) at an edge of a bout, with no gait-periodic window between it and the
         bout's end, are not steps: there the acceleration is the hand's, not the gait's (:meth:`_leave_out_handling`).
+        Off by default (a strapped sensor is not handled); ``pdr steps`` and ``pdr run`` turn it on for a phone's
+        placements (:data:`pdr.pipelines.steps.PHONE_PLACEMENTS`).
 
     Attributes
     ----------
@@ -154,7 +156,7 @@ class WaveletStepDetection(Algorithm):
     def __init__(self, *, level: int = 4, min_step_freq_hz: float = 1.0, max_step_freq_hz: float = 3.5,
                  bout_window_s: float = 5.0, min_acc_std_mps2: float = 0.3, min_periodicity: float = 0.25,
                  min_bout_steps: int = 4, min_peak_ratio: float = 0.25, signal: str = "norm", bout_pad_s: float = 2.5,
-                 stride_check: bool = True, track_cadence: bool = True, leave_out_handling: bool = True):
+                 stride_check: bool = True, track_cadence: bool = True, leave_out_handling: bool = False):
         self.level = level
         self.leave_out_handling = leave_out_handling
         self.track_cadence = track_cadence
