@@ -528,6 +528,17 @@ def test_phyphox_folder_zip_and_decimal_comma(tmp_path):
     np.testing.assert_allclose(semi.imu["acc_y_mps2"], acc["Y (m/s^2)"].dropna(), rtol=1e-8)
 
 
+def test_phyphox_tab_separated_export(tmp_path):
+    """phyphox's "Tabulator" export: the same quoted headers, tab-separated, ending without a line break."""
+    src = tmp_path / "tabs"
+    shutil.copytree(HAND / "phyphox_multi", src)
+    for path in sorted(src.glob("*.csv")):
+        path.write_bytes(path.read_bytes().replace(b'","', b'"\t"').replace(b",", b"\t"))
+    rec = load_recording(_import("phyphox", src, tmp_path / "a")[0][0])
+    comma = load_recording(_import("phyphox", HAND / "phyphox_multi", tmp_path / "b")[0][0])
+    pd.testing.assert_frame_equal(rec.imu, comma.imu)
+
+
 def test_phyphox_linear_only_and_g_units_are_refused(tmp_path, capsys):
     lin = tmp_path / "lin"
     lin.mkdir()
