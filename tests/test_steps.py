@@ -335,7 +335,10 @@ def test_phone_handling_at_the_bout_edges_is_left_out():
     t = kept.steps_["t_s"].to_numpy()
     assert not any(((t > a) & (t < b)).any() for a, b in truth)
     pd.testing.assert_frame_equal(kept.handling_, found)
-    assert len(detect_steps(rec, {})) == len(kept.steps_)  # on for a phone in the hand
+    np.testing.assert_allclose(kept.left_out_[["t_start_s", "t_end_s"]], found[["t_start_s", "t_end_s"]])
+    assert kept.left_out_["n_maxima"].sum() >= 4
+    with pytest.warns(UserWarning, match=r"the phone was handled at .* s, .* s .*not counted as steps"):
+        assert len(detect_steps(rec, {})) == len(kept.steps_)  # on for a phone in the hand
     assert make_detector(None, "waist").leave_out_handling is False  # a strapped sensor is not handled
 
 
@@ -349,7 +352,7 @@ def test_phone_handled_while_walking_on_keeps_its_steps():
     rec = simulate(sc, seed=104)
     det = WaveletStepDetection(leave_out_handling=True).detect(rec.imu)
     assert len(det.handling_) >= 2  # both moves seen
-    assert len(det.steps_) == len(WaveletStepDetection().detect(rec.imu).steps_)
+    assert len(det.steps_) == len(WaveletStepDetection().detect(rec.imu).steps_) and det.left_out_.empty
     assert abs(len(det.steps_) - len(rec.reference["steps"])) <= 2
 
 

@@ -66,6 +66,11 @@ def detect_steps(rec: Recording, config: dict) -> pd.DataFrame:
         warnings.warn(f"{rec.id}: sampling rate {u.rate_hz:.1f} Hz is low (< {LOW_RATE_HZ:g} Hz): contact times are "
                       f"only good to about {1e3 / u.rate_hz:.0f} ms", stacklevel=2)
     detector.detect(u)
+    left_out = getattr(detector, "left_out_", None)
+    if left_out is not None and len(left_out):
+        spans = ", ".join(f"{r.t_start_s:.1f}-{r.t_end_s:.1f} s" for r in left_out.itertuples())
+        warnings.warn(f"{rec.id}: the phone was handled at {spans} (its attitude turned at a walking bout's edge): "
+                      f"{int(left_out['n_maxima'].sum())} acceleration peak(s) there not counted as steps", stacklevel=2)
     steps = detector.steps_.sort_values("t_s", kind="stable").reset_index(drop=True)
     if len(steps) == 0:
         warnings.warn(f"{rec.id}: no walking found, no steps", stacklevel=2)

@@ -130,6 +130,7 @@ class WaveletStepDetection(Algorithm):
     steps_ : DataFrame ``t_s, bout_id`` (the instant of foot contact; bouts split where the stop rule fires).
     bouts_ : DataFrame ``bout_id, t_start_s, t_end_s, step_period_s, n_steps``.
     handling_ : DataFrame ``t_start_s, t_end_s, turn_deg``: the handling intervals found (empty when not looked for).
+    left_out_ : DataFrame ``t_start_s, t_end_s, n_maxima``: the handling intervals whose maxima were left out.
     detail_ : the reconstructed detail band on the uniform grid (0 outside bouts), m/s².
     t_s_ : the uniform grid.
 
@@ -186,6 +187,8 @@ class WaveletStepDetection(Algorithm):
         self.detail_ = np.zeros(len(u))
         self.steps_, self.bouts_ = empty_steps(), empty_bouts()
         self.handling_ = pd.DataFrame({c: pd.Series(dtype=float) for c in HANDLING_COLUMNS})
+        self.left_out_ = pd.DataFrame({"t_start_s": pd.Series(dtype=float), "t_end_s": pd.Series(dtype=float),
+                                       "n_maxima": pd.Series(dtype=int)})
         min_step_s, max_step_s = 1.0 / self.max_step_freq_hz, 1.0 / self.min_step_freq_hz
         if u.rate_hz < 2.0 * self.max_step_freq_hz:
             warnings.warn(f"steps: sampling rate {u.rate_hz:.1f} Hz is below twice the highest cadence "
@@ -205,7 +208,7 @@ class WaveletStepDetection(Algorithm):
             edge = undecided_samples(u.rate_hz, self.bout_window_s)
             decided[:edge] = decided[len(decided) - edge:] = False
         sums = (np.concatenate([[0.0], np.cumsum(x)]), np.concatenate([[0.0], np.cumsum(x * x)]))
-        times, bout_ids, rows = [], [], []
+        times, bout_ids, rows, left_out = [], [], [], []
         bout_id = 0
         for a, b in bouts:
             p = period[a:b]
@@ -217,7 +220,8 @@ class WaveletStepDetection(Algorithm):
             local = moving_average(np.where(np.isfinite(local), local, step_s), int(round(self.bout_window_s * u.rate_hz)))
             t_peaks = self._bout_steps(u, x, a, b, local, core[a:b], sums)
             if handled is not None:
-                t_peaks = self._leave_out_handling(u, handled.handling_, decided, a, b, t_peaks)
+                t_peaks, dropped = self._leave_out_handling(u, handled.handling_, decided, a, b, t_peaks)
+                left_out += dropped
             for seg in self._split_stops(t_peaks, step_s, max_step_s):
                 if len(seg) < self.min_bout_steps:
                     continue
@@ -225,6 +229,8 @@ class WaveletStepDetection(Algorithm):
                 bout_ids.append(np.full(len(seg), bout_id))
                 rows.append((bout_id, float(seg[0]), float(seg[-1]), step_s, len(seg)))
                 bout_id += 1
+        if left_out:
+            self.left_out_ = pd.DataFrame(left_out, columns=list(self.left_out_.columns))
         if times:
             self.steps_ = pd.DataFrame({"t_s": np.concatenate(times), "bout_id": np.concatenate(bout_ids).astype(int)})
             self.bouts_ = pd.DataFrame(rows, columns=BOUT_COLUMNS)
@@ -295,18 +301,22 @@ class WaveletStepDetection(Algorithm):
 
     @staticmethod
     def _leave_out_handling(u: UniformImu, handling: np.ndarray, walking: np.ndarray, a: int, b: int,
-                            t: np.ndarray) -> np.ndarray:
+                            t: np.ndarray) -> tuple[np.ndarray, list[tuple[float, float, int]]]:
         """``t`` without the maxima inside the handling intervals at an edge of the bout ``[a, b)``: no walking
         (``walking``: windows found gait-periodic) between the interval and the bout's start, or between it and the
         bout's end. There the walker starts or stops, and the acceleration is the hand's. Handling with walking on
-        both sides (the phone taken out while walking on) keeps its steps."""
+        both sides (the phone taken out while walking on) keeps its steps. Also returns the intervals that lost
+        maxima: ``(t_start_s, t_end_s, n_maxima)``."""
         k = np.clip(np.round((t - u.t_s[0]) * u.rate_hz).astype(int), 0, len(u) - 1)
         keep = np.ones(len(t), bool)
+        dropped = []
         for lo, hi in runs(handling[a:b]):
             lo, hi = a + lo, a + hi
-            if not (walking[a:lo].any() and walking[hi:b].any()):
-                keep &= (k < lo) | (k >= hi)
-        return t[keep]
+            inside = (k >= lo) & (k < hi)
+            if inside.any() and not (walking[a:lo].any() and walking[hi:b].any()):
+                keep &= ~inside
+                dropped.append((float(u.t_s[lo]), float(u.t_s[hi - 1]), int(inside.sum())))
+        return t[keep], dropped
 
     @staticmethod
     def _split_stops(t: np.ndarray, step_s: float, max_step_s: float) -> list[np.ndarray]:
