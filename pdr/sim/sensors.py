@@ -18,7 +18,7 @@ from scipy.spatial.transform import Rotation
 
 from pdr.constants import GRAVITY_MPS2
 from pdr.errors import InputError
-from pdr.sim.gait import WalkKinematics, rotation_zyx
+from pdr.sim.gait import WalkKinematics, _smoothstep, rotation_zyx
 
 WAIST_ABOVE_HIP_PER_HEIGHT = 0.08  # lower-back sensor height minus hip height, per body height (see below)
 
@@ -97,12 +97,6 @@ def _smooth_random(rng: np.random.Generator, t: np.ndarray, amplitude: float, pe
     return amplitude * out * np.sqrt(2.0 / len(periods_s))
 
 
-def _smoothstep(x: np.ndarray) -> np.ndarray:
-    """Quintic 0 -> 1 ramp with zero first and second derivatives at both ends (a minimum-jerk reach, Flash & Hogan 1985)."""
-    x = np.clip(x, 0.0, 1.0)
-    return x * x * x * (10.0 + x * (-15.0 + 6.0 * x))
-
-
 def handling_intervals(spec: ImuSpec, duration_s: float) -> pd.DataFrame:
     """``reference/handling.csv`` of a phone in the hand: ``t_start_s, t_end_s, action`` (``put_away`` over the
     ``handling_s`` before each ``in_pocket_s`` interval, ``take_out`` over the ``handling_s`` after it), within the recording."""
@@ -119,7 +113,8 @@ class SensorPose:
     """Position and orientation (sensor -> world) of a sensor at a placement, at any times.
 
     A phone in the hand with ``in_pocket_s`` intervals rides in the left trouser pocket during them (the pocket
-    placement's pose) and moves between pocket and hand over ``handling_s`` (a minimum-jerk blend of the two poses:
+    placement's pose) and moves between pocket and hand over ``handling_s`` (a minimum-jerk blend of the two poses,
+    the quintic ramp of a reach, Flash & Hogan 1985:
     positions interpolated, the rotation from pocket to hand followed along its geodesic), fumbled on the way: a
     smooth random offset of about 3 cm and turn of about 30° that vanish at both ends (the fingers gripping, turning
     the phone to find its screen).

@@ -1,4 +1,4 @@
-"""Handling the phone (taking it out, putting it away, turning it in the hand): its attitude against the vertical turns."""
+"""Handling the phone (taken out, put away, turned in the hand): its attitude against the vertical turns."""
 
 from __future__ import annotations
 
