@@ -9,12 +9,15 @@ re-projection error of the observed points (eq. 6-7, with the bonus C for stayin
 (resampling, Sec. 5.4) and corrected by an extended Kalman filter (eq. 8-11). The whole body pose (hip, knee and
 ankle of both legs) follows from the state and the form's joint-angle templates.
 
-Public objects
---------------
-``ThighCameraModel`` (pinhole intrinsics and the thigh mount), ``FourierFormTemplates`` (per-form Fourier templates
-of the gait parameters and joint angles, learnt from motion-capture-like tables of training walks, and the
-transition diagram), ``WearableCameraGaitEstimation`` (the estimator), ``project_points`` / ``observation_jacobian``
-(the observation model h and its Jacobian H, public for tests).
+Modules
+-------
+:mod:`pdr.gait.camera_model` (``ThighCameraModel``: pinhole intrinsics and the thigh mount),
+:mod:`pdr.gait.camera_templates` (``FourierFormTemplates``: per-form Fourier templates of the gait parameters and
+joint angles, learnt from motion-capture-like tables of training walks, and the transition diagram),
+:mod:`pdr.gait.camera_observation` (``project_points`` / ``observation_jacobian``: the observation model h and its
+Jacobian H; ``joint_positions``: the body pose), :mod:`pdr.gait.camera_filter` (``predict``, ``ekf_update``,
+``most_likely_forms``, ``cycles_from_phase``) and this module (``WearableCameraGaitEstimation``, the estimator), which
+also exports the public names of the others.
 
 Frames: world = local east-north-up (m), heading counter-clockwise from east. Body frame: origin on the ground below
 the walker on the path (the state's ``x, y``), ``f`` forward along the heading, ``l`` to the left, ``u`` up.
@@ -24,489 +27,30 @@ x = image right (u), y = image down (v), z = optical axis.
 
 from __future__ import annotations
 
-import dataclasses
+import time
 import warnings
-from typing import Any
 
 import numpy as np
 import pandas as pd
 
+from pdr.base import Algorithm
 from pdr.errors import InputError
-from pdr.gait.fourier import DEFAULT_ORDER, fourier_coefficients, fourier_derivative, fourier_design_matrix
-from pdr.io.recording import numeric_frame
+from pdr.gait.camera_filter import cycles_from_phase, ekf_update, most_likely_forms, predict
+from pdr.gait.camera_model import JOINTS, SIDES, TWO_PI, ThighCameraModel
+from pdr.gait.camera_observation import joint_positions, observation_jacobian, project_points
+from pdr.gait.camera_templates import MOCAP_COLUMNS, PARAMS, FourierFormTemplates, _numeric, body_frame_parameters, joint_columns
 
-TWO_PI = 2.0 * np.pi
-SIDES = ("left", "right")
-JOINTS = ("pelvis", "hip_left", "knee_left", "ankle_left", "hip_right", "knee_right", "ankle_right")
+__all__ = [
+    "JOINTS", "MIN_POINTS", "MOCAP_COLUMNS", "PARAMS", "SIDES", "STATE", "FourierFormTemplates", "ThighCameraModel",
+    "WearableCameraGaitEstimation", "body_frame_parameters", "cycles_from_phase", "ekf_update", "joint_columns",
+    "joint_positions", "most_likely_forms", "observation_jacobian", "predict", "project_points",
+]
+
 STATE = ("e_m", "n_m", "heading_rad", "phase_rad", "phase_rate_radps")
-# Template parameters (columns of each form's coefficient matrix). rho: path advance per radian of phase.
-PARAMS = ("rho_m_per_rad", "pelvis_f_m", "pelvis_l_m", "pelvis_u_m") + tuple(
-    f"{side}_{p}" for side in SIDES for p in ("hip_f_m", "hip_l_m", "hip_u_m", "thigh_pitch_rad", "thigh_roll_rad", "knee_flex_rad"))
-_P = {name: i for i, name in enumerate(PARAMS)}
 MIN_POINTS = 4  # fewer than this cannot fix a camera pose: the frame is predicted only
-_R0 = np.diag([1.0, -1.0, -1.0])  # thigh frame of a vertical thigh, in the body frame
 
 
-# ----------------------------------------------------------------------------------------------------------------
-# Rotations (batched over leading axes)
-# ----------------------------------------------------------------------------------------------------------------
-def _rot(axis: int, a: np.ndarray) -> np.ndarray:
-    a = np.asarray(a, float)
-    c, s = np.cos(a), np.sin(a)
-    r = np.zeros(a.shape + (3, 3))
-    i, j = [(1, 2), (2, 0), (0, 1)][axis]
-    r[..., axis, axis] = 1.0
-    r[..., i, i] = c
-    r[..., j, j] = c
-    r[..., i, j] = -s
-    r[..., j, i] = s
-    return r
-
-
-def _drot(axis: int, a: np.ndarray) -> np.ndarray:
-    """d/da of :func:`_rot`."""
-    a = np.asarray(a, float)
-    c, s = np.cos(a), np.sin(a)
-    r = np.zeros(a.shape + (3, 3))
-    i, j = [(1, 2), (2, 0), (0, 1)][axis]
-    r[..., i, i] = -s
-    r[..., j, j] = -s
-    r[..., i, j] = -c
-    r[..., j, i] = c
-    return r
-
-
-# ----------------------------------------------------------------------------------------------------------------
-# The camera
-# ----------------------------------------------------------------------------------------------------------------
-@dataclasses.dataclass(frozen=True)
-class ThighCameraModel:
-    """A pinhole camera (no lens distortion, as the paper's undistorted images) fixed to a thigh.
-
-    Parameters
-    ----------
-    fps, focal_px, cx_px, cy_px, width_px, height_px : frame rate and intrinsics.
-    side : ``"left"`` or ``"right"`` thigh (the paper: the outer side of the right thigh).
-    along_thigh_m : distance of the optical centre from the hip joint centre along the thigh.
-    outward_m : offset from the thigh axis to the outer side (skin and mount).
-    tilt_out_deg : the optical axis points down the thigh, turned outward by this angle (so that it sees the floor
-        beside the foot rather than the own leg).
-    """
-
-    fps: float = 100.0
-    focal_px: float = 200.0
-    cx_px: float = 159.5
-    cy_px: float = 119.5
-    width_px: int = 320
-    height_px: int = 240
-    side: str = "right"
-    along_thigh_m: float = 0.15
-    outward_m: float = 0.08
-    tilt_out_deg: float = 20.0
-
-    def __post_init__(self):
-        if self.side not in SIDES:
-            raise InputError(f"thigh camera: expected side 'left' or 'right', found {self.side!r}")
-        positive = ("fps", "focal_px", "width_px", "height_px", "along_thigh_m")
-        for k in positive + ("cx_px", "cy_px", "outward_m", "tilt_out_deg"):
-            v = getattr(self, k)
-            try:
-                x = float(v)
-            except (TypeError, ValueError, OverflowError):
-                x = float("nan")
-            if not np.isfinite(x) or (k in positive and x <= 0):
-                raise InputError(f"thigh camera: expected a {'positive ' if k in positive else ''}number for {k}, found {v!r}")
-
-    @property
-    def _out(self) -> float:
-        return 1.0 if self.side == "right" else -1.0  # thigh y points right: outward on the right leg
-
-    @property
-    def offset_thigh_m(self) -> np.ndarray:
-        """Optical centre in the thigh frame (x fwd, y right, z hip->knee)."""
-        return np.array([0.0, self._out * self.outward_m, self.along_thigh_m])
-
-    @property
-    def rotation_thigh(self) -> np.ndarray:
-        """Camera axes (columns: image x, image y, optical axis) in the thigh frame."""
-        return _rot(0, -self._out * np.radians(self.tilt_out_deg))
-
-    @property
-    def intrinsics(self) -> np.ndarray:
-        return np.array([[self.focal_px, 0.0, self.cx_px], [0.0, self.focal_px, self.cy_px], [0.0, 0.0, 1.0]])
-
-    def to_dict(self) -> dict[str, Any]:
-        return dataclasses.asdict(self)
-
-
-# ----------------------------------------------------------------------------------------------------------------
-# Per-form templates
-# ----------------------------------------------------------------------------------------------------------------
-def joint_columns(joint: str) -> list[str]:
-    """The world-position columns of a joint in the motion-capture and joint tables: ``<joint>_{e,n,u}_m``."""
-    return [f"{joint}_{a}_m" for a in "enu"]
-
-
-MOCAP_COLUMNS = ["t_s", "e_m", "n_m", "heading_rad", "phase_rad", "phase_rate_radps", "form"] + [
-    c for j in JOINTS for c in joint_columns(j)]
-
-
-def _check_table(df: pd.DataFrame, columns: list[str], what: str) -> None:
-    if not isinstance(df, pd.DataFrame):
-        raise InputError(f"{what}: expected a DataFrame, found {type(df).__name__}")
-    missing = [c for c in columns if c not in df.columns]
-    if missing:
-        raise InputError(f"{what}: expected columns {', '.join(missing)}, found {', '.join(map(str, df.columns)) or 'none'}")
-
-
-def _numeric(df: pd.DataFrame, columns: list[str], what: str, also: list[str] = ()) -> pd.DataFrame:
-    """``df`` with ``columns`` as numbers (:func:`pdr.io.recording.numeric_frame`) and ``also`` present."""
-    _check_table(df, list(columns) + list(also), what)
-    return df.assign(**numeric_frame(df[list(columns)], what))
-
-
-def body_frame_parameters(mocap: pd.DataFrame) -> pd.DataFrame:
-    """The template parameters (``PARAMS``) of every sample of a motion-capture table, plus the segment lengths
-    ``thigh_m``, ``shank_m``: joints relative to the path point in the body frame, thigh pitch and roll from the
-    hip->knee direction, knee flexion = thigh pitch - shank pitch in the thigh's plane, and the path advance per
-    radian of phase (forward path speed / phase rate)."""
-    psi = mocap["heading_rad"].to_numpy(float)
-    c, s = np.cos(psi), np.sin(psi)
-    base = np.stack([mocap["e_m"].to_numpy(float), mocap["n_m"].to_numpy(float), np.zeros(len(psi))], -1)
-
-    def body(joint):
-        d = mocap[joint_columns(joint)].to_numpy(float) - base
-        return np.stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], d[:, 2]], -1)
-
-    out = {}
-    t = mocap["t_s"].to_numpy(float)
-    v_e = np.gradient(base[:, 0], t)
-    v_n = np.gradient(base[:, 1], t)
-    rate = mocap["phase_rate_radps"].to_numpy(float)
-    out["rho_m_per_rad"] = (c * v_e + s * v_n) / np.maximum(rate, 1e-6)
-    pel = body("pelvis")
-    out["pelvis_f_m"], out["pelvis_l_m"], out["pelvis_u_m"] = pel.T
-    thigh, shank = [], []
-    for side in SIDES:
-        hip, knee, ankle = body(f"hip_{side}"), body(f"knee_{side}"), body(f"ankle_{side}")
-        out[f"{side}_hip_f_m"], out[f"{side}_hip_l_m"], out[f"{side}_hip_u_m"] = hip.T
-        a, b = knee - hip, ankle - knee
-        la, lb = np.linalg.norm(a, axis=1), np.linalg.norm(b, axis=1)
-        thigh.append(la)
-        shank.append(lb)
-        za = a / la[:, None]
-        pitch = np.arcsin(np.clip(za[:, 0], -1, 1))
-        roll = np.arctan2(za[:, 1], -za[:, 2])
-        # the shank in the thigh's plane: undo the roll
-        cr, sr = np.cos(roll), np.sin(roll)
-        zb = b / lb[:, None]
-        b_u = -sr * zb[:, 1] + cr * zb[:, 2]
-        out[f"{side}_thigh_pitch_rad"] = pitch
-        out[f"{side}_thigh_roll_rad"] = roll
-        out[f"{side}_knee_flex_rad"] = pitch - np.arctan2(zb[:, 0], -b_u)
-    frame = pd.DataFrame(out)[list(PARAMS)]
-    frame["thigh_m"] = np.mean(thigh, axis=0)
-    frame["shank_m"] = np.mean(shank, axis=0)
-    return frame
-
-
-class FourierFormTemplates:
-    """Per-form Fourier templates of the gait (Watanabe et al. Sec. 3-4) and the transition diagram between forms.
-
-    Parameters
-    ----------
-    order : Fourier order of every template (the paper: 5, eq. 2).
-    transition_margin_cycles : samples closer than this (in gait cycles) to a change of form label are left out of
-        the fit (the gait is in between two forms there).
-    min_cycles : a form needs at least this many cycles of samples.
-
-    Attributes
-    ----------
-    forms_ : form names, in order of first appearance.
-    coefficients_ : (n_forms, 2*order+1, n_params) array, ``[a0, a1, b1, ...]`` per parameter (``PARAMS``):
-        path advance per radian of phase, pelvis and hip offsets in the body frame, thigh pitch and roll and knee
-        flexion of both legs, all as functions of the phase eta (rad; 0 = left heel strike).
-    phase_rate_radps_ : nominal phase rate (cadence, 2*pi per stride) of each form (median).
-    speed_mps_ : nominal walking speed of each form (median path speed; the paper's forms hold the speed, eq. 2).
-    transitions_ : (n_forms, n_forms) bool, ``[a, b]`` = form b may follow form a (the diagonal is true).
-    thigh_m_, shank_m_ : segment lengths of the subject (median of the training samples).
-    n_cycles_ : cycles of training samples per form.
-
-    Notes
-    -----
-    The paper stores each form as the Fourier coefficients of the waist height, speed, turn rate and relative joint
-    positions sampled by motion capture (eq. 2) and draws the transition diagram from the order in which forms
-    follow each other in the samples (Fig. 3, 5, 10). Here the joints are represented by angles and segment
-    lengths (so that the thigh camera's orientation follows directly), the speed by the path advance per radian of
-    phase (so that a form's speed scales with the estimated cadence), and the turn rate is left to the state's
-    heading (the training walks are straight and turning; turns are tracked, not templated). The form labels of
-    the training samples come with the table (the PCA + k-means forms of ``pdr.gait`` can supply them).
-    Each template is one least-squares fit over all the cycles of a form, the mean cycle (the paper keeps the one
-    sample closest to the cluster centre).
-
-    Example
-    -------
-    >>> templates = FourierFormTemplates().fit(mocap_table)        # doctest: +SKIP
-    >>> templates.forms_                                           # doctest: +SKIP
-    ['slow_walk', 'walk', 'fast_walk', 'run']
-    """
-
-    def __init__(self, *, order: int = DEFAULT_ORDER, transition_margin_cycles: float = 1.0, min_cycles: float = 3.0):
-        self.order = order
-        self.transition_margin_cycles = transition_margin_cycles
-        self.min_cycles = min_cycles
-
-    def fit(self, mocap: pd.DataFrame) -> "FourierFormTemplates":
-        """Learn the templates from a motion-capture table (``MOCAP_COLUMNS``; several walks may be concatenated,
-        told apart by an optional ``walk`` column, each with increasing ``t_s``)."""
-        _check_table(mocap, MOCAP_COLUMNS, "form templates: training table")
-        walks = mocap["walk"].to_numpy() if "walk" in mocap.columns else np.zeros(len(mocap), int)
-        forms: list[str] = []
-        for f in mocap["form"].astype(str):
-            if f not in forms:
-                forms.append(f)
-        params, phase, label, keep, rates = [], [], [], [], []
-        trans = np.eye(len(forms), dtype=bool)
-        for w in pd.unique(walks):
-            sub = mocap[walks == w].sort_values("t_s")
-            if len(sub) < 3 or not np.all(np.diff(sub["t_s"].to_numpy(float)) > 0):
-                raise InputError(f"form templates: expected strictly increasing t_s within walk {w!r}, found otherwise")
-            eta = sub["phase_rad"].to_numpy(float)
-            lab = sub["form"].astype(str).to_numpy()
-            change = np.flatnonzero(lab[1:] != lab[:-1])
-            for i in change:
-                trans[forms.index(lab[i]), forms.index(lab[i + 1])] = True
-            ok = sub["phase_rate_radps"].to_numpy(float) > 0.5  # walking, not standing
-            for i in change:
-                ok &= np.abs(eta - 0.5 * (eta[i] + eta[i + 1])) > TWO_PI * self.transition_margin_cycles
-            params.append(body_frame_parameters(sub))
-            phase.append(eta)
-            label.append(lab)
-            keep.append(ok)
-            rates.append(sub["phase_rate_radps"].to_numpy(float))
-        params_df = pd.concat(params, ignore_index=True)
-        eta, lab, ok, rate = np.concatenate(phase), np.concatenate(label), np.concatenate(keep), np.concatenate(rates)
-        coef, med_rate, med_speed, cycles = [], [], [], []
-        for f in forms:
-            m = ok & (lab == f)
-            n_cyc = float(np.unique(np.floor(eta[m] / TWO_PI)).size) if m.any() else 0.0
-            if m.sum() < 2 * self.order + 1:
-                raise InputError(f"form templates: expected samples over whole gait cycles of form {f!r}, found {m.sum()} samples")
-            coef.append(fourier_coefficients(eta[m], params_df.loc[m, list(PARAMS)].to_numpy(float), self.order))
-            med_rate.append(float(np.median(rate[m])))
-            med_speed.append(float(np.median(params_df.loc[m, "rho_m_per_rad"].to_numpy() * rate[m])))
-            cycles.append(n_cyc)
-        short = [f for f, c in zip(forms, cycles) if c < self.min_cycles]
-        if short:
-            raise InputError(f"form templates: expected at least {self.min_cycles:g} cycles per form, found fewer for {', '.join(short)}")
-        self.forms_ = forms
-        self.coefficients_ = np.stack(coef)
-        self.phase_rate_radps_ = np.array(med_rate)
-        self.speed_mps_ = np.array(med_speed)
-        self.transitions_ = trans
-        self.thigh_m_ = float(np.median(params_df["thigh_m"]))
-        self.shank_m_ = float(np.median(params_df["shank_m"]))
-        self.n_cycles_ = dict(zip(forms, cycles))
-        return self
-
-    # JSON round trip: a fitted template set is the estimator's per-user model
-    def to_dict(self) -> dict[str, Any]:
-        return {"order": self.order, "forms": self.forms_, "params": list(PARAMS),
-                "coefficients": self.coefficients_.tolist(), "phase_rate_radps": self.phase_rate_radps_.tolist(),
-                "speed_mps": self.speed_mps_.tolist(),
-                "transitions": self.transitions_.astype(int).tolist(), "thigh_m": self.thigh_m_, "shank_m": self.shank_m_}
-
-    @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> "FourierFormTemplates":
-        if list(d.get("params", [])) != list(PARAMS):
-            raise InputError(f"form templates: expected parameters {', '.join(PARAMS)}, found {d.get('params')}")
-        out = cls(order=int(d["order"]))
-        out.forms_ = list(d["forms"])
-        out.coefficients_ = np.asarray(d["coefficients"], float)
-        out.phase_rate_radps_ = np.asarray(d["phase_rate_radps"], float)
-        out.speed_mps_ = np.asarray(d["speed_mps"], float)
-        out.transitions_ = np.asarray(d["transitions"], bool)
-        out.thigh_m_, out.shank_m_ = float(d["thigh_m"]), float(d["shank_m"])
-        out.n_cycles_ = {}
-        return out
-
-    def evaluate(self, form: np.ndarray, phase_rad: np.ndarray, derivative: bool = False) -> np.ndarray:
-        """(B, n_params) template values (or d/d eta) of forms ``form`` (indices) at phases ``phase_rad``."""
-        coef = self._dcoef if derivative else self.coefficients_
-        design = fourier_design_matrix(phase_rad, self.order)
-        return np.einsum("bc,bcp->bp", design, coef[np.asarray(form, int)])
-
-    @property
-    def _dcoef(self) -> np.ndarray:
-        if getattr(self, "_dcoef_cache", None) is None:
-            self._dcoef_cache = np.stack([fourier_derivative(c) for c in self.coefficients_])
-        return self._dcoef_cache
-
-
-# ----------------------------------------------------------------------------------------------------------------
-# The observation model h (eq. 8) and its Jacobian H
-# ----------------------------------------------------------------------------------------------------------------
-def _camera_in_body(tp: np.ndarray, dtp: np.ndarray | None, camera: ThighCameraModel):
-    """Camera centre c_b and rotation R_bc in the body frame from template values (B, n_params), and their
-    derivatives with respect to the phase when ``dtp`` is given."""
-    side = camera.side
-    hip = tp[:, [_P[f"{side}_hip_f_m"], _P[f"{side}_hip_l_m"], _P[f"{side}_hip_u_m"]]]
-    th, ph = tp[:, _P[f"{side}_thigh_pitch_rad"]], tp[:, _P[f"{side}_thigh_roll_rad"]]
-    rx, ry = _rot(0, ph), _rot(1, -th)
-    r_bt = rx @ ry @ _R0
-    m = camera.offset_thigh_m
-    r_tc = camera.rotation_thigh
-    c_b = hip + r_bt @ m
-    r_bc = r_bt @ r_tc
-    if dtp is None:
-        return c_b, r_bc, None, None
-    dhip = dtp[:, [_P[f"{side}_hip_f_m"], _P[f"{side}_hip_l_m"], _P[f"{side}_hip_u_m"]]]
-    dth, dph = dtp[:, _P[f"{side}_thigh_pitch_rad"]], dtp[:, _P[f"{side}_thigh_roll_rad"]]
-    dr_bt = (_drot(0, ph) @ ry @ _R0) * dph[:, None, None] - (rx @ _drot(1, -th) @ _R0) * dth[:, None, None]
-    return c_b, r_bc, dhip + dr_bt @ m, dr_bt @ r_tc
-
-
-def project_points(state: np.ndarray, form: np.ndarray, points_m: np.ndarray, templates: FourierFormTemplates,
-                   camera: ThighCameraModel, jacobian: bool = False):
-    """The observation model h: image points (B, N, 2) of world points ``points_m`` (N, 3) seen by the thigh camera
-    of the walker in states ``state`` (B, 5) walking in forms ``form`` (B,), and the depth (B, N) along the optical
-    axis (points with depth <= 0 are behind the camera).
-
-    With ``jacobian``: also H = dh/dstate (B, N, 2, 5) and dh/d(camera pose error) (B, N, 2, 6), the derivative
-    with respect to a small rotation (3, rad, camera axes) and translation (3, m, camera axes) of the camera away
-    from where the templates put it (used to model the template error as one pose error shared by all points)."""
-    state = np.atleast_2d(np.asarray(state, float))
-    form = np.broadcast_to(np.asarray(form, int), (len(state),))
-    x, y, xi, eta = state[:, 0], state[:, 1], state[:, 2], state[:, 3]
-    tp = templates.evaluate(form, eta)
-    dtp = templates.evaluate(form, eta, derivative=True) if jacobian else None
-    c_b, r_bc, dc_b, dr_bc = _camera_in_body(tp, dtp, camera)
-    c, s = np.cos(xi)[:, None], np.sin(xi)[:, None]
-    dx = points_m[None, :, 0] - x[:, None]
-    dy = points_m[None, :, 1] - y[:, None]
-    r = np.stack([c * dx + s * dy, -s * dx + c * dy, np.broadcast_to(points_m[None, :, 2], dx.shape)], -1)
-    q = r - c_b[:, None, :]
-    pc = q @ r_bc  # R_bc^T q, row-wise
-    z = pc[..., 2]
-    zs = np.where(np.abs(z) < 1e-6, 1e-6, z)
-    f = camera.focal_px
-    uv = np.stack([f * pc[..., 0] / zs + camera.cx_px, f * pc[..., 1] / zs + camera.cy_px], -1)
-    if not jacobian:
-        return uv, z
-    zero = np.zeros_like(dx)
-    # d pc / d (x, y, xi, eta, camera rotation (3), camera translation (3)): (B, N, 3, 10)
-    dq = np.empty(dx.shape + (3, 4))  # d q / d (x, y, xi, eta)
-    dq[..., 0] = np.stack([-np.broadcast_to(c, dx.shape), np.broadcast_to(s, dx.shape), zero], -1)
-    dq[..., 1] = np.stack([-np.broadcast_to(s, dx.shape), -np.broadcast_to(c, dx.shape), zero], -1)
-    dq[..., 2] = np.stack([r[..., 1], -r[..., 0], zero], -1)
-    dq[..., 3] = -np.broadcast_to(dc_b[:, None, :], dx.shape + (3,))
-    dpc = np.zeros(dx.shape + (3, 10))
-    dpc[..., :4] = np.einsum("bnik,bij->bnjk", dq, r_bc)  # R_bc^T dq
-    dpc[..., 3] += q @ dr_bc  # dR_bc^T q
-    # pose error, camera axes: the scene turned by a small rotation w and the camera moved by t: pc' = pc + w x pc - t
-    px, py, pz = pc[..., 0], pc[..., 1], pc[..., 2]
-    dpc[..., 0, 5], dpc[..., 0, 6] = pz, -py
-    dpc[..., 1, 4], dpc[..., 1, 6] = -pz, px
-    dpc[..., 2, 4], dpc[..., 2, 5] = py, -px
-    dpc[..., 0, 7] = dpc[..., 1, 8] = dpc[..., 2, 9] = -1.0
-    inv = (f / zs)[..., None]
-    jac = np.stack([inv * (dpc[..., 0, :] - (pc[..., 0] / zs)[..., None] * dpc[..., 2, :]),
-                    inv * (dpc[..., 1, :] - (pc[..., 1] / zs)[..., None] * dpc[..., 2, :])], -2)
-    out = np.zeros(dx.shape + (2, 5))
-    out[..., :4] = jac[..., :4]
-    return uv, z, out, jac[..., 4:]
-
-
-def observation_jacobian(state, form, points_m, templates, camera) -> np.ndarray:
-    """H (B, N, 2, 5): the Jacobian of :func:`project_points` with respect to the state."""
-    return project_points(state, form, points_m, templates, camera, jacobian=True)[2]
-
-
-def joint_positions(state: np.ndarray, form: np.ndarray, templates: FourierFormTemplates) -> dict[str, np.ndarray]:
-    """World positions (B, 3) of ``JOINTS`` for states (B, 5) in forms (B,): the body pose of the templates."""
-    state = np.atleast_2d(np.asarray(state, float))
-    tp = templates.evaluate(np.broadcast_to(np.asarray(form, int), (len(state),)), state[:, 3])
-    c, s = np.cos(state[:, 2]), np.sin(state[:, 2])
-
-    def world(b):
-        return np.stack([state[:, 0] + c * b[:, 0] - s * b[:, 1], state[:, 1] + s * b[:, 0] + c * b[:, 1], b[:, 2]], -1)
-
-    out = {"pelvis": world(tp[:, [_P["pelvis_f_m"], _P["pelvis_l_m"], _P["pelvis_u_m"]]])}
-    for side in SIDES:
-        hip = tp[:, [_P[f"{side}_hip_f_m"], _P[f"{side}_hip_l_m"], _P[f"{side}_hip_u_m"]]]
-        th, ph, kn = (tp[:, _P[f"{side}_{k}"]] for k in ("thigh_pitch_rad", "thigh_roll_rad", "knee_flex_rad"))
-        cr, sr = np.cos(ph), np.sin(ph)
-
-        def seg(angle, length):  # R_x(roll) (sin a, 0, -cos a) * length
-            return length * np.stack([np.sin(angle), sr * np.cos(angle), -cr * np.cos(angle)], -1)
-
-        knee = hip + seg(th, templates.thigh_m_)
-        ankle = knee + seg(th - kn, templates.shank_m_)
-        out[f"hip_{side}"], out[f"knee_{side}"], out[f"ankle_{side}"] = world(hip), world(knee), world(ankle)
-    return out
-
-
-def predict(state: np.ndarray, cov: np.ndarray, form: np.ndarray, dt_s: float, templates: FourierFormTemplates,
-            process_std: np.ndarray, cadence_std_fraction: float, cadence_tau_s: float):
-    """State prediction g (eq. 1, 4, 5) over ``dt_s`` in the given forms, its Jacobian G and the predicted
-    covariance (eq. 9). ``process_std``: white-noise densities of (x, y, heading, phase) per sqrt(s), (4,) or per
-    candidate (B, 4). The phase rate returns to the form's cadence (a first-order Gauss-Markov process with time
-    constant ``cadence_tau_s`` and a spread of ``cadence_std_fraction`` of the cadence): a form walks at its own
-    pace (the paper's forms have their own periods, Fig. 9), give or take the step-to-step timing."""
-    x, y, xi, eta, rate = state.T
-    rho = templates.evaluate(form, eta)[:, _P["rho_m_per_rad"]]
-    drho = templates.evaluate(form, eta, derivative=True)[:, _P["rho_m_per_rad"]]
-    nominal = templates.phase_rate_radps_[np.asarray(form, int)]
-    keep = np.exp(-dt_s / cadence_tau_s)
-    step = rho * rate * dt_s
-    c, s = np.cos(xi), np.sin(xi)
-    out = np.stack([x + step * c, y + step * s, xi, eta + rate * dt_s, nominal + keep * (rate - nominal)], -1)
-    g = np.broadcast_to(np.eye(5), (len(state), 5, 5)).copy()
-    g[:, 0, 2], g[:, 1, 2] = -step * s, step * c
-    g[:, 0, 3], g[:, 1, 3] = drho * rate * dt_s * c, drho * rate * dt_s * s
-    g[:, 0, 4], g[:, 1, 4] = rho * dt_s * c, rho * dt_s * s
-    g[:, 3, 4] = dt_s
-    g[:, 4, 4] = keep
-    var = np.empty((len(state), 5))
-    var[:, :4] = np.broadcast_to(process_std, (len(state), 4)) ** 2 * dt_s
-    var[:, 4] = (cadence_std_fraction * nominal) ** 2 * (1.0 - keep**2)
-    cov_bar = g @ cov @ np.swapaxes(g, 1, 2) + np.einsum("bi,ij->bij", var, np.eye(5))
-    return out, cov_bar, g
-
-
-def ekf_update(state_bar: np.ndarray, cov_bar: np.ndarray, residual: np.ndarray, jac: np.ndarray,
-               weight: np.ndarray, pixel_std_px: float, jac_pose: np.ndarray | None = None,
-               pose_cov: np.ndarray | None = None):
-    """EKF update (eq. 10-11) of B candidates with residuals u - h (B, N, 2), H (B, N, 2, 5) and per-point
-    inlier weights (B, N) in {0, 1}.
-
-    The observation noise is Q = D + J Sigma_pose J^T: independent pixel noise D (``pixel_std_px``^2 for inliers,
-    infinite for outliers) plus, when ``jac_pose`` (B, N, 2, 6) and ``pose_cov`` (6, 6) are given, one camera pose
-    error shared by all points of the frame (the stored form never fits the observed step exactly, and that
-    error moves all points together; without it 60 points would count as 60 independent measurements).
-    Written in the information form with the matrix inversion lemma,
-    K (u - h) = (Sigma^-1 + H^T Q^-1 H)^-1 H^T Q^-1 (u - h),  Q^-1 = D^-1 - D^-1 J (Sigma_pose^-1 + J^T D^-1 J)^-1 J^T D^-1,
-    so that only 5x5 and 6x6 systems are solved whatever the number of points."""
-    w = weight / pixel_std_px**2
-    a = np.einsum("bnik,bn,bnil->bkl", jac, w, jac)
-    b = np.einsum("bnik,bn,bni->bk", jac, w, residual)
-    if jac_pose is not None:
-        c = np.einsum("bnik,bn,bnil->bkl", jac, w, jac_pose)
-        m = np.linalg.inv(pose_cov) + np.einsum("bnik,bn,bnil->bkl", jac_pose, w, jac_pose)
-        f = np.einsum("bnik,bn,bni->bk", jac_pose, w, residual)
-        c_minv = np.swapaxes(np.linalg.solve(m, np.swapaxes(c, 1, 2)), 1, 2)  # C M^-1 (M symmetric)
-        a = a - c_minv @ np.swapaxes(c, 1, 2)
-        b = b - np.einsum("bkl,bl->bk", c_minv, f)
-    info = np.linalg.inv(cov_bar) + a
-    cov = np.linalg.inv(info)
-    cov = 0.5 * (cov + np.swapaxes(cov, 1, 2))
-    return state_bar + np.einsum("bkl,bl->bk", cov, b), cov
-
-
-# ----------------------------------------------------------------------------------------------------------------
-# The estimator
-# ----------------------------------------------------------------------------------------------------------------
-class WearableCameraGaitEstimation:
+class WearableCameraGaitEstimation(Algorithm):
     """Walking state, walking form and body pose from a thigh camera observing known ground points
     (Watanabe et al. 2011).
 
@@ -706,8 +250,6 @@ class WearableCameraGaitEstimation:
         initial_e_m, initial_n_m, initial_heading_rad : the start pose (e.g. the start mark on the chessboard),
             with the uncertainty of the ``initial_*_std`` parameters; phase and form are searched.
         """
-        import time
-
         frames = _numeric(frames, ["t_s"], "thigh camera frames")
         observations = _numeric(observations, ["frame", "u_px", "v_px"], "thigh camera observations", also=["point_id"])
         points = _numeric(points, ["e_m", "n_m", "u_m"], "ground points", also=["point_id"])
@@ -886,39 +428,3 @@ class WearableCameraGaitEstimation:
         self.n_predicted_only_ = 0
         self.n_relocalised_ = 0
         self.time_s_ = 0.0
-
-
-def most_likely_forms(form_score: np.ndarray, allowed: np.ndarray, log_stay: float) -> np.ndarray:
-    """The most likely sequence of forms given the whole walk (Viterbi backtracking): ``form_score`` (frames,
-    forms) holds, per frame, the log weight of the heaviest candidate of each form (the filter's max-product
-    forward score; -inf: none), ``allowed[a, b]`` whether form b may follow form a, ``log_stay`` the bonus C for
-    staying (eq. 6). From the best form of the last frame, each earlier frame takes the form whose score plus the
-    transition into the later frame's form is highest. -1 where no candidate exists."""
-    n = len(form_score)
-    out = np.full(n, -1)
-    log_t = np.where(allowed, 0.0, -np.inf) + log_stay * np.eye(len(allowed))
-    started = np.isfinite(form_score).any(axis=1)
-    if not started.any():
-        return out
-    last = int(np.flatnonzero(started)[-1])
-    out[last] = int(np.argmax(form_score[last]))
-    for i in range(last - 1, -1, -1):
-        if not started[i]:
-            break
-        into = form_score[i] + log_t[:, out[i + 1]]
-        out[i] = int(np.argmax(into if np.isfinite(into).any() else form_score[i]))  # a re-search may jump forms
-    return out
-
-
-def cycles_from_phase(t_s: np.ndarray, phase_rad: np.ndarray, form: np.ndarray) -> pd.DataFrame:
-    """Gait cycles between consecutive first crossings of multiples of 2 pi by the phase, with the form held for
-    most of each cycle: ``t_start_s, t_end_s, form``."""
-    ok = np.isfinite(phase_rad)
-    t, ph, fm = t_s[ok], phase_rad[ok], np.asarray(form)[ok]
-    k = np.floor(np.maximum.accumulate(ph) / TWO_PI) if len(ph) else ph  # a phase stepping back starts no cycle
-    starts = np.flatnonzero(np.diff(k) > 0) + 1
-    rows = []
-    for a, b in zip(starts[:-1], starts[1:]):
-        vals, counts = np.unique(fm[a:b].astype(str), return_counts=True)
-        rows.append((t[a], t[b], vals[np.argmax(counts)]))
-    return pd.DataFrame(rows, columns=["t_start_s", "t_end_s", "form"])
