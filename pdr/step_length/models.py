@@ -279,7 +279,7 @@ class WeinbergStepLength(StepLengthModel):
 
     Attributes
     ----------
-    step_length_m_, step_length_std_m_ : per step.
+    step_length_m_, step_length_std_m_ : per step; n_fit_steps_ : steps used by the last :meth:`fit`.
 
     Notes
     -----
@@ -319,7 +319,7 @@ class KimStepLength(StepLengthModel):
 
     Attributes
     ----------
-    step_length_m_, step_length_std_m_ : per step.
+    step_length_m_, step_length_std_m_ : per step; n_fit_steps_ : steps used by the last :meth:`fit`.
 
     Notes
     -----
@@ -361,7 +361,7 @@ class ZijlstraStepLength(StepLengthModel):
 
     Attributes
     ----------
-    step_length_m_, step_length_std_m_ : per step.
+    step_length_m_, step_length_std_m_ : per step; n_fit_steps_ : steps used by the last :meth:`fit`.
 
     Notes
     -----
