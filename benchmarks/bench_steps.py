@@ -149,7 +149,7 @@ def run(quick: bool = False) -> list[dict]:
             rows.append(_row(f"mobgap/{name} ({len(ics)} INDIP ICs)", "IC F1 whole recording vs INDIP", _f1(*m), "", ">= 0.95", "-"))
         rows.append(_row(f"mobgap/{name} ({len(union)} union ICs)", "IC F1 whole recording vs INDIP + Stereophoto", _f1(*m_u),
                          "", ">= 0.95", "-"))
-    anchor = "INDIP reference ICs (issue 3 target; no published figure checked here)"
+    anchor = "INDIP reference ICs (target; no published figure checked here)"
     rows.append(_row("mobgap/all", "IC F1 whole recording vs INDIP (bout detection included)", _f1(*tot), "", ">= 0.95", anchor))
     rows.append(_row("mobgap/all", "IC F1 whole recording vs INDIP + Stereophoto ICs", _f1(*tot_u), "", ">= 0.95", anchor))
     rows.append(_row("mobgap/all", "IC F1 within INDIP walking bouts", _f1(*tot_in), "", ">= 0.95", anchor))

@@ -1,4 +1,4 @@
-"""Step detection, walking bouts, per-step features and ``pdr steps`` (the steps table of INTERFACES.md)."""
+"""Step detection, walking bouts, per-step features and ``pdr steps`` (the steps table of CONTRACT.md)."""
 
 from __future__ import annotations
 
