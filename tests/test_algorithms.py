@@ -239,6 +239,7 @@ ACTIONS = {
     "ZijlstraStepLength": lambda w, r: ("estimate", (w["signal_steps"],), {"subject": {"height_m": 1.75}}),
     "PeakStepDetection": lambda w, r: ("detect", (w["u"],), {}),
     "WaveletStepDetection": lambda w, r: ("detect", (w["u"],), {}),
+    "AttitudeHandlingDetection": lambda w, r: ("detect", (w["u"],), {}),
 }
 
 
