@@ -12,9 +12,9 @@ from scipy.optimize import minimize
 
 from pdr.base import Algorithm
 from pdr.errors import InputError, collect_warnings, warn
+from pdr.schema import STRIDE_COLUMNS
 from pdr.slip.model import SlipBody, simulate_flow, simulate_step, stride_kinematics
 
-STRIDE_COLUMNS = ["t_start_s", "t_end_s", "foot", "length_m", "length_std_m", "source"]
 SEGMENT_COLUMNS = ["t_start_s", "t_toe_off_s", "t_end_s"]
 # Thesis Table 2 (vx m/s, vy m/s, leg angle 10 deg, K); K read as tens of kN/m (its code uses 18,000 N/m).
 TABLE2_STARTS = tuple((vx, vy, math.radians(10.0), k) for vx, vy, k in (
