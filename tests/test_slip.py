@@ -166,3 +166,17 @@ def test_impossible_mount_and_too_slow_video_give_no_stride():
     slow = slice(None, None, int(round(0.5 * dur / 0.01)))  # two samples per stride: one per step
     with pytest.warns(UserWarning, match="twice the cadence"):
         assert SlipOpticalFlowStride(**est.get_params()).estimate(t[slow], f[slow], segments=segs).strides_.empty
+
+
+def test_a_runaway_swing_clearance_keeps_the_slip_clearance_with_a_wide_sigma():
+    est = SlipOpticalFlowStride(camera_from_knee_m=0.3, focal_px=140.0, strides_per_fit=1, scale_windows=1)
+    t, f, _, _ = _measured(est, (1.3, -0.2, math.radians(15), 12000.0))
+    assert est.estimate(t, f).fits_.clearance_converged.all()
+    # a clearance law this steep makes the scale grow faster than the stride: the passes run away
+    steep = {**est.get_params(), "swing_clearance_ratio": 0.15}
+    runaway = SlipOpticalFlowStride(**steep).estimate(t, f)
+    own = SlipOpticalFlowStride(**{**steep, "clearance_iterations": 0}).estimate(t, f)
+    fits = runaway.fits_
+    assert not fits.clearance_converged.any()
+    np.testing.assert_allclose(fits.length_m, own.fits_.length_m, rtol=1e-9)  # the SLIP's own clearance
+    assert np.all(fits.length_std_m > own.fits_.length_std_m) and np.all(fits.length_std_m >= 0.5 * fits.spread_m)

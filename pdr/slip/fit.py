@@ -20,6 +20,7 @@ SEGMENT_COLUMNS = ["t_start_s", "t_toe_off_s", "t_end_s"]
 # the swing-clearance fixed point has converged when its last pass moves the stride by less than this fraction
 # (well inside the model's own error, ``model_sigma_fraction``)
 CLEARANCE_TOLERANCE = 0.02
+MAX_CLEARANCE_AMPLIFICATION = 2.0  # the fixed point may at most double the first pass's change of the stride
 # Thesis Table 2 (vx m/s, vy m/s, leg angle 10 deg, K); K read as tens of kN/m (its code uses 18,000 N/m).
 TABLE2_STARTS = tuple((vx, vy, math.radians(10.0), k) for vx, vy, k in (
     (1.6, -0.5, 17000.0), (1.5, -0.5, 16000.0), (1.6, -0.5, 15000.0), (1.4, -0.5, 17000.0), (1.2, -0.5, 18000.0)))
@@ -378,9 +379,11 @@ class SlipOpticalFlowStride(Algorithm):
         """
         half = max(0, int(self.scale_windows) // 2)
         start = [(f["length_m"], f["m_per_px"], f["length_std_m"]) for f in fits]
-        previous = [f["length_m"] for f in fits]
-        for _ in range(max(0, int(self.clearance_iterations))):
+        previous = first = [f["length_m"] for f in fits]
+        for k in range(max(0, int(self.clearance_iterations))):
             previous = [f["length_m"] for f in fits]
+            if k == 1:
+                first = previous
             lengths = np.array([np.nan if f["flag"] else f["length_m"] for f in fits]) / self.length_scale
             ref = _running_median(lengths, half)  # the length scale stays a pure factor
             for j, f in enumerate(fits):
@@ -395,11 +398,14 @@ class SlipOpticalFlowStride(Algorithm):
                 f["length_std_m"] *= length_m / f["length_m"]
                 f["length_m"], f["m_per_px"], f["clearance_stride_m"] = length_m, length_m / f["meas_disp_px"], ref[j]
         # a fixed point still moving in the last pass runs away (a camera low over the floor, long strides of a short
-        # leg: the scale grows faster than the stride): keep the SLIP's own clearance, with a sigma that covers the
-        # strides the passes went through
-        for f, (length0, scale0, sigma0), prev in zip(fits, start, previous):
+        # leg: the scale grows faster than the stride), and one that moved the stride over twice as far as its
+        # first pass did multiplies the fit's error as much (x 1 / (1 - gain) for a map of that gain): keep the
+        # SLIP's own clearance, with a sigma that covers the strides the passes went through
+        for f, (length0, scale0, sigma0), prev, one in zip(fits, start, previous, first):
             moved = abs(f["length_m"] - prev) / f["length_m"]
-            f["clearance_converged"] = bool(moved <= CLEARANCE_TOLERANCE)
+            step = one - length0
+            amplification = (f["length_m"] - length0) / step if abs(step) > 1e-3 * length0 else 1.0
+            f["clearance_converged"] = bool(moved <= CLEARANCE_TOLERANCE and amplification <= MAX_CLEARANCE_AMPLIFICATION)
             if not f["clearance_converged"]:
                 spread = abs(f["length_m"] - length0)
                 f["length_m"], f["m_per_px"] = length0, scale0
