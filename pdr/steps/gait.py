@@ -83,26 +83,29 @@ def resolve_octaves(period_s: np.ndarray, walking: np.ndarray, half_acf: np.ndar
     step by a few percent (step-time coefficient of variation 2-4% in healthy adults and below about 11% in impaired
     gait: Hausdorff 2005, "Gait variability: methods, modeling and meaning", J NeuroEng Rehabil 2:19), so two
     neighbouring walking windows whose periods are in a ratio of 2 within :data:`OCTAVE_TOLERANCE` (one step's 10%
-    deviation; the windows' mean periods, over 5-15 steps, differ less) disagree on what a step is, not on the cadence. A step-periodic signal is stride-periodic as well but not the converse, so the
-    shorter period is the step and the longer is halved, the correction carrying along the run; unless the longer
-    window's own acf at half its period (``half_acf``) is a deep trough (at most :data:`ANTI_PHASE_ACF`): the signal
-    is in anti-phase there, as a step-periodic one is, and the shorter neighbour is the one in error (phone handling
-    next to the walking). ``acf(T/2) = P_even - P_odd``, the share of the periodic power at the even harmonics of
-    ``1/T`` minus that at the odd ones; -0.5 asks for three quarters at the odd ones, where a sign flip over ``T/2``
-    is the rule: Oxford hand, bag and neck phones -0.8, a trouser-pocket phone's stride about 0.
+    deviation; the windows' mean periods, over 5-15 steps, differ less) disagree on what a step is, not on the
+    cadence. A step-periodic signal is stride-periodic as well but not the converse, so the shorter period is the
+    step and the longer is halved, the correction carrying along the run; unless the longer window's own acf at half
+    its period (``half_acf``) is a deep trough (at most :data:`ANTI_PHASE_ACF`): the signal is in anti-phase there,
+    as a step-periodic one is, and the shorter neighbour is the one in error (phone handling next to the walking).
+    ``acf(T/2) = P_even - P_odd``, the share of the periodic power at the even harmonics of ``1/T`` minus that at
+    the odd ones; -0.5 asks for three quarters at the odd ones, where a sign flip over ``T/2`` is the rule (Oxford
+    hand, bag and neck phones: about -0.8; the stride of a simulated trouser-pocket phone: about -0.1).
     """
     p = period_s.copy()
     ambiguous = walking & (half_acf > ANTI_PHASE_ACF)
-    changed = True
-    while changed:
+    changed, forward = True, True
+    while changed:  # sweeps alternately forward and backward, so a correction crosses a run in one sweep
         changed = False
-        for i in np.flatnonzero(ambiguous):
+        order = np.flatnonzero(ambiguous)
+        for i in (order if forward else order[::-1]):
             for j in (i - 1, i + 1):
                 if 0 <= j < len(p) and walking[j] and 2.0 / OCTAVE_TOLERANCE <= p[i] / p[j] <= 2.0 * OCTAVE_TOLERANCE:
                     p[i] /= 2.0
                     ambiguous[i] = False
                     changed = True
                     break
+        forward = not forward
     return p
 
 
@@ -133,7 +136,8 @@ def walking_mask(x: np.ndarray, rate_hz: float, *, window_s: float, min_step_s: 
     """Per-sample walking flag and step period (s, NaN where not walking) of a signal (the acceleration norm).
 
     Windows of ``window_s`` with a hop of a quarter window; each window decides for its central hop. A window is
-    at rest when its |a| standard deviation is below :func:`rest_threshold_mps2` at its step period.
+    at rest when its |a| standard deviation is below :func:`rest_threshold_mps2` at its step period. With
+    ``stride_check``, :func:`resolve_octaves` then halves the strides taken for steps along each walking run.
     """
     n = len(x)
     win = int(round(window_s * rate_hz))
