@@ -14,8 +14,8 @@ import pandas as pd
 from pdr.errors import InputError, warn
 from pdr.schema import GNSS_LOCAL_COLUMNS, TRAJECTORY_COLUMNS, require_table, wrap_rad
 
-STEP_COLUMNS = ("t_s", "step_length_m", "step_length_std_m")  # what the fusion reads of a steps table
-STRIDE_COLUMNS = ("t_start_s", "t_end_s", "length_m", "length_std_m")  # what it reads of a strides table
+FUSION_STEP_COLUMNS = ("t_s", "step_length_m", "step_length_std_m")  # what the fusion reads of a steps table
+FUSION_STRIDE_COLUMNS = ("t_start_s", "t_end_s", "length_m", "length_std_m")  # what it reads of a strides table
 BOUT_START_HEADING_STD_RAD = 0.5  # heading change of a step whose change is unknown (a bout's first step without heading_rad)
 
 
@@ -79,7 +79,7 @@ def prepare(steps: pd.DataFrame, gnss: pd.DataFrame | None, strides: pd.DataFram
     A step lasting more than ``max_step_duration_s`` (steps missed by the detector, a stop, the start after standing)
     is a *gap*: the displacement over it is known only to ``gap_speed_std_mps`` times its duration, along and across,
     so that GNSS, not the step model, says where the walker went."""
-    require_table(steps, STEP_COLUMNS, "steps")
+    require_table(steps, FUSION_STEP_COLUMNS, "steps")
     if "heading_change_rad" not in steps.columns and "heading_rad" not in steps.columns:
         raise InputError("steps: expected a heading_change_rad or heading_rad column, found neither")
     if len(steps) == 0:
@@ -212,7 +212,7 @@ def _add_gnss(problem: Problem, gnss: pd.DataFrame, default_h_acc_m: float, tole
 def _add_strides(problem: Problem, strides: pd.DataFrame) -> None:
     """Stride records -> range constraints between the epochs nearest to their start and end (any source; the
     ``source`` column names it, ``"stride"`` where the table has none)."""
-    require_table(strides, STRIDE_COLUMNS, "strides")
+    require_table(strides, FUSION_STRIDE_COLUMNS, "strides")
     if len(strides) == 0:
         return
     t0, t1 = _floats(strides, "t_start_s", "strides"), _floats(strides, "t_end_s", "strides")
