@@ -54,7 +54,7 @@ class DoubleFeetCalibration(Algorithm):
         self.asymmetry_std_m = asymmetry_std_m
 
     def estimate(self, strides: pd.DataFrame) -> DoubleFeetCalibration:
-        """Calibrate a strides table holding the strides of both feet (columns of INTERFACES.md)."""
+        """Calibrate a strides table holding the strides of both feet (columns of CONTRACT.md)."""
         missing = [c for c in REQUIRED if c not in strides.columns]
         if missing:
             raise InputError(f"strides: expected columns {', '.join(REQUIRED)}, missing {', '.join(missing)}")

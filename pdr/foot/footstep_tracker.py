@@ -57,7 +57,7 @@ class FootStepTrackerStride(Algorithm):
     ----------
     critical_times_ : DataFrame, one row per swing: ``t_uplift_s, t_liftoff_s, t_landing_s, t_rest_s`` and the
         sample indices ``i_uplift, i_liftoff, i_landing, i_rest``.
-    strides_ : the strides table (INTERFACES.md: ``t_start_s, t_end_s, foot, length_m, length_std_m, source``) plus
+    strides_ : the strides table (CONTRACT.md: ``t_start_s, t_end_s, foot, length_m, length_std_m, source``) plus
         ``forward_m, lateral_m`` (displacement along / across the foot direction), ``height_change_m``,
         ``toe_angle_rad`` (angle from the foot direction to the moving direction, positive towards the foot
         frame's x axis, i.e. to the right), ``max_pitch_rad``, ``t_liftoff_s, t_landing_s``,

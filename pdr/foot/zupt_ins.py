@@ -100,7 +100,7 @@ class ZuptInsStride(Algorithm):
     trajectory_ : DataFrame ``t_s, x_m, y_m, z_m, vx_mps, vy_mps, vz_mps`` per sample from the first stance on, in a
         local level frame (z up; x/y keep the yaw of the sensor at the first stance, since a foot IMU alone cannot
         observe the absolute heading).
-    strides_ : strides table (INTERFACES.md) plus ``dx_m, dy_m, dz_m`` (displacement between consecutive mid-stances
+    strides_ : strides table (CONTRACT.md) plus ``dx_m, dy_m, dz_m`` (displacement between consecutive mid-stances
         of this foot), ``heading_rad`` (direction of the displacement, in the local frame) and
         ``heading_change_rad`` (since the previous stride of this foot; NaN for the first),
         ``t_swing_start_s, t_swing_end_s`` (the swing between the two stances); ``length_m`` is the

@@ -86,7 +86,7 @@ def _drop_implausible(strides: pd.DataFrame, foot: str) -> pd.DataFrame:
 
 
 def foot_strides(rec: Recording, config: dict) -> pd.DataFrame | None:
-    """Strides table (INTERFACES.md; ``source = "foot_imu"``) of the foot IMUs of ``rec``; None without a foot IMU.
+    """Strides table (CONTRACT.md, `pdr.schema.STRIDE_COLUMNS`; ``source = "foot_imu"``) of the foot IMUs of ``rec``; None without a foot IMU.
 
     Extra columns: ``method``, ``heading_change_rad`` (the change of the stride direction since the previous stride of
     the same foot, from the foot INS; NaN for the first stride of a foot and for ``footstep_tracker``) and

@@ -1,6 +1,6 @@
 """Per-step signal features that some step-length models need beyond the steps table of ``detect_steps``.
 
-The steps table (INTERFACES.md) carries ``step_freq_hz`` and ``acc_var_m2ps4``, enough for the regression model.
+The steps table (CONTRACT.md) carries ``step_freq_hz`` and ``acc_var_m2ps4``, enough for the regression model.
 Weinberg needs the range of the vertical acceleration over the step, Kim the mean absolute dynamic acceleration,
 and Zijlstra's inverted pendulum the vertical excursion of the centre of mass. These are computed here from the
 recording's main IMU and the step instants, orientation-free: the vertical is the direction of the low-passed
