@@ -207,7 +207,7 @@ def classify_forms(rec: Path, forms: Path, out: Path, *, config_path=None) -> Pa
     return Path(out)
 
 
-def per_form_step_lengths(rec: Recording, steps: pd.DataFrame, section: dict[str, Any], config: dict,
+def per_form_step_lengths(rec: Recording, steps: pd.DataFrame, section: dict[str, Any],
                           base_dir: Path | None = None) -> tuple[pd.DataFrame, dict[str, Any]]:
     """``pdr run`` with ``[gait_forms] forms = "forms.json"``: classify the cycles of ``rec`` and replace the step
     lengths (``step_length_m``, ``step_length_std_m``) of the steps in each form by that form's step model from the
@@ -225,7 +225,7 @@ def per_form_step_lengths(rec: Recording, steps: pd.DataFrame, section: dict[str
     models = {k: model_from_dict(v, f"forms {path}: step model {k!r}") for k, v in (doc.get("step_models") or {}).items()
               if k != "all"}
     steps = steps.copy()
-    cycles = recording_cycles(rec, config, steps=steps)
+    cycles = recording_cycles(rec, steps=steps)
     labelled = forms.classify(cycles).cycles_forms_
     kinds = step_forms(steps, labelled)
     steps["form"] = pd.Series(kinds, dtype=object).fillna("").to_numpy()

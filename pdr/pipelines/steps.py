@@ -49,7 +49,11 @@ def detect_steps(rec: Recording, config: dict) -> pd.DataFrame:
     if not isinstance(config, dict):
         raise InputError(f"configuration: expected a dict of sections, found {type(config).__name__}")
     detector = make_detector(config.get("steps"), rec.placement)
-    heading = AttitudeStepHeading.from_config(config.get("heading"))
+    return steps_table(rec, detector, AttitudeStepHeading.from_config(config.get("heading")))
+
+
+def steps_table(rec: Recording, detector, heading: AttitudeStepHeading) -> pd.DataFrame:
+    """The steps table of ``rec`` from a step detector and a heading estimator (see :func:`detect_steps`)."""
     u = uniform_imu(rec.imu)
     if u.rate_hz < min_step_rate_hz():
         warn(f"{rec.id}: no steps: sampling rate {u.rate_hz:.1f} Hz is below twice the highest cadence "
