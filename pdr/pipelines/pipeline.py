@@ -36,6 +36,7 @@ from pdr.pipelines.gait_forms import GAIT_FORMS_KEYS, per_form_step_lengths
 from pdr.pipelines.leg_camera import camera_strides
 from pdr.pipelines.not_walking import drop_not_walking, gnss_only_trajectory, interval_message, not_walking_intervals
 from pdr.pipelines.steps import DETECTORS, make_detector, steps_table
+from pdr.signals import ImuSignals
 from pdr.signals.faults import SensorFaultDetection
 from pdr.step_length import choose_model
 from pdr.step_length.body import body_model
@@ -285,7 +286,8 @@ class Pipeline(Algorithm):
             gnss = gnss_local(rec, settings) if self.use_gnss else None
             lap("gnss_s")
 
-            steps = steps_table(rec, detector, heading).reset_index(drop=True)
+            signals = ImuSignals(rec.imu)  # resampled and its attitude estimated once, for every stage
+            steps = steps_table(rec, detector, heading, signals).reset_index(drop=True)
             not_walking = not_walking_intervals(steps, gnss, rec.subject.get("height_m"))
             for iv in not_walking:
                 warn(interval_message(rec.id, iv))
@@ -297,7 +299,7 @@ class Pipeline(Algorithm):
             steps["step_length_std_m"] = np.asarray(model.step_length_std_m_, float)
             gait_forms_info = None
             if self.gait_forms is not None and len(steps):
-                steps, gait_forms_info = per_form_step_lengths(rec, steps, self.gait_forms)
+                steps, gait_forms_info = per_form_step_lengths(rec, steps, self.gait_forms, signals=signals)
                 if gait_forms_info["steps_per_form_model"] and hasattr(fusion, "calibrate_step_scale"):
                     # keep the forms' relative step lengths: GNSS calibrates one scale of them, not one regression
                     fusion = type(fusion)(**{**fusion.get_params(), "calibrate_step_model": False,
@@ -342,7 +344,7 @@ class Pipeline(Algorithm):
             stride_scales = getattr(fusion, "stride_scales_", None) or {}  # per source; the EKF does not use strides
             lap("fusion_s")
 
-            bouts, bout_steps = recording_bouts(rec, steps, gnss)  # bouts.csv: walking bouts and their mechanics
+            bouts, bout_steps = recording_bouts(rec, steps, gnss, signals)  # bouts.csv: walking bouts and their mechanics
             lap("bouts_s")
 
         run_warnings = [*earlier_warnings, *caught]
