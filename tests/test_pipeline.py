@@ -97,3 +97,15 @@ def test_bad_pipeline_input_is_one_error(walk):
         pdr.Pipeline.from_config(["steps"])
     with pytest.raises(InputError, match="expected a recording"):
         pdr.Pipeline().run(walk)
+
+
+def test_the_readme_python_example_runs(walk, tmp_path, monkeypatch):
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text(encoding="utf-8")
+    section = readme[readme.index("### Python API"):]
+    code = section[section.index("```python\n") + len("```python\n"):section.index("```\n", section.index("```python"))]
+    walk.rename(tmp_path / "sim_short")
+    monkeypatch.chdir(tmp_path)
+    scope: dict = {}
+    with collect_warnings():
+        exec(compile(code, "README.md", "exec"), scope)  # noqa: S102
+    assert scope["res"].summary_["n_steps"] == len(scope["res"].steps_) > 10
