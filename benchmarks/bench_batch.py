@@ -1,7 +1,7 @@
 """``pdr batch`` throughput: N simulated 10-minute walks through the local process pool with 1 and 2 workers, and
 through a Dask ``LocalCluster`` of 2 workers (its start-up included), on this machine.
 
-Issue 8 target: with 100 recordings the pool with 2 workers reaches at least 1.8 times the throughput of 1 worker.
+Target: with 100 recordings the pool with 2 workers reaches at least 1.8 times the throughput of 1 worker.
 The walks: ``configs/sim/walk_30min_gps.toml`` cut to its first 10 minutes, ``DISTINCT`` seeds (different walkers,
 speeds and noise), each copied under several recording ids up to N (simulating 100 walks would cost more than running
 them; a copy costs a run exactly what the original does). The machine is shared: the load average before and after
@@ -120,5 +120,5 @@ def run(quick: bool = False) -> list[dict]:
                 rows.append({"area": "batch", "case": case, "metric": f"throughput ratio, {label} / 1 worker",
                              "ours": round(one / timings[label], 2), "unit": "x",
                              "target": f">= {TARGET_RATIO} (100 recordings)" if label.startswith("local") else "",
-                             "anchor": "issue 8: 100 simulated 10-minute recordings on this 2-core machine"})
+                             "anchor": "target: 100 simulated 10-minute recordings on this 2-core machine"})
     return rows

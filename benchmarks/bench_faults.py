@@ -1,4 +1,4 @@
-"""Sensor faults on simulated walks (issue 9): 5% of the time in injected faults of every kind of
+"""Sensor faults on simulated walks: 5% of the time in injected faults of every kind of
 :mod:`pdr.sim.faults` (dropouts, stuck and saturated sensors, clock jumps, duplicated samples, rate changes, steel
 near the magnetometer, 300 m GNSS jumps reporting a few metres of accuracy), placed at random.
 
@@ -30,7 +30,7 @@ DETECTED_AS = {"dropout": "gap", "clock_jump": "gap", "stuck": "stuck", "saturat
                "gnss_jump": "gnss_jump"}
 FAULT_FRACTION = 0.05
 MATCH_TOLERANCE_S = 0.5
-ANCHOR = "issue 9 targets (no published figure for this injection set)"
+ANCHOR = "targets (no published figure for this injection set)"
 
 
 def scenario(duration_s: float) -> dict:

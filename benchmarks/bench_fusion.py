@@ -143,10 +143,10 @@ ROOT = Path(__file__).resolve().parents[1]
 SIM_CONFIGS = ROOT / "configs" / "sim"
 HUMOLIRE = Path("data/imus/1/square_2x")  # inside the humolire_phone_landmarks dataset
 ANCHOR_LADETTO = "Ladetto et al. 2000: 1.8% distance error (40.8 m over 2,300 m) with DGPS-calibrated steps"
-ANCHOR_ISSUE = "issue 4 target"
+ANCHOR_TARGET = "target"
 
 
-def _row(case: str, metric: str, ours: float, unit: str, target: str, anchor: str = ANCHOR_ISSUE) -> dict:
+def _row(case: str, metric: str, ours: float, unit: str, target: str, anchor: str = ANCHOR_TARGET) -> dict:
     return {"area": AREA, "case": case, "metric": metric, "ours": round(float(ours), 3), "unit": unit, "target": target,
             "anchor": anchor}
 
@@ -317,7 +317,7 @@ def _stride_scale_rows(seeds: list[int], bias: float = 0.9) -> list[dict]:
         cost.append((t2 - t1) / (t1 - t0))
     case = (f"synthetic_walk 10 min + GNSS, leg_camera strides {100 * (1 - bias):.0f}% short, "
             f"seeds {','.join(map(str, seeds))}, mean")
-    anchor = "issue 4 follow-up: stride sources calibrated by GNSS"
+    anchor = "stride sources calibrated by GNSS"
     return [_row(case, "distance error, stride lengths as given", float(np.mean(off)), "%", "-", anchor),
             _row(case, "distance error, stride scale calibrated", float(np.mean(on)), "%", "<= 2", anchor),
             _row(case, "stride scale error (estimate x bias - 1)", float(np.mean(scale_err)), "%", "<= 3", anchor),
@@ -352,7 +352,7 @@ def _humolire_rows() -> list[dict]:
             rows.append(_row(f"HuMoLiRe square_2x (real phone, {distance:.1f} m), landmarks 1-2 as 1 m fixes",
                              f"{name}: mean error at landmarks 3-8 / distance walked", 100.0 * float(err.mean()) / distance,
                              "%", "<= 2" if name == "graph" else "baseline",
-                             "Ghaoui et al. 2023 (HuMoLiRe): map-aided particle filter" if name == "graph" else ANCHOR_ISSUE))
+                             "Ghaoui et al. 2023 (HuMoLiRe): map-aided particle filter" if name == "graph" else ANCHOR_TARGET))
     return rows
 
 

@@ -1,4 +1,4 @@
-"""Walking forms (issue 7, Watanabe et al.): per-cycle form accuracy on simulated mixed walks and on real shoe-IMU
+"""Walking forms (Watanabe et al.): per-cycle form accuracy on simulated mixed walks and on real shoe-IMU
 data (gaitmap: level walking, stairs up, stairs down), distance with per-form step models against one model, and the
 speed of classifying an hour of cycles.
 

@@ -4,7 +4,7 @@ running, a flight phase in the simulator's spring-mass gait).
 
 The steps table of ``pdr steps`` (``detect_steps``) gives ``heading_rad`` in VQF's 6D frame, whose yaw zero is
 arbitrary: the frame offset is the circular mean of (heading - truth) over the walking steps, so a running step
-pointing backwards (issue 3: the walking phase relation applied to running) shows as a 180-degree error.
+pointing backwards (the walking phase relation applied to running) shows as a 180-degree error.
 Run with ``.venv/bin/python -m benchmarks heading`` (``--quick``: one seed).
 """
 

@@ -1,4 +1,4 @@
-"""I/O speed: loading + validating one hour of 100 Hz IMU (issue 2: under 1 s), and the import time of every real dataset.
+"""I/O speed: loading + validating one hour of 100 Hz IMU (target: under 1 s), and the import time of every real dataset.
 
 Run: ``.venv/bin/python -m benchmarks io`` (``--quick``: one repetition instead of the best of three).
 """
@@ -67,7 +67,7 @@ def run(quick: bool = False) -> list[dict]:
         loaded = load_recording(rec_path)
         assert len(loaded.imu) == HOUR_ROWS
         t_load = _best_of(lambda: load_recording(rec_path), repeats)
-        anchor = f"issue 2 target: {HOUR_ROWS:,} rows (acc, gyr, mag, baro; {size_mb:.0f} MB CSV) under {LOAD_TARGET_S:g} s"
+        anchor = f"target: {HOUR_ROWS:,} rows (acc, gyr, mag, baro; {size_mb:.0f} MB CSV) under {LOAD_TARGET_S:g} s"
         rows.append({"area": "io", "case": "load + validate 1 h of 100 Hz IMU", "metric": "time", "ours": round(t_load, 3),
                      "unit": "s", "target": f"< {LOAD_TARGET_S:g}", "anchor": anchor})
         if _has_option("mode.max_threads"):  # pandas >= 3.1 reads large CSVs on several threads; also time one

@@ -58,10 +58,10 @@ def run(quick: bool = False) -> list[dict]:
             (rec,) = import_recordings("humolire", dataset_dir("humolire_phone_landmarks") / HUMOLIRE, tmp_path / "humolire")
             summary, metrics, elapsed = _run_and_evaluate(Path(rec), tmp_path / "out_humolire")
             rows += _rows("HuMoLiRe square_2x (real phone, 120.8 m, no fixes)", summary, metrics, elapsed,
-                          "issue 4: <= 2% with the first two landmarks as fixes; here no fix at all (origin+heading alignment)")
+                          "target: <= 2% with the first two landmarks as fixes; here no fix at all (origin+heading alignment)")
         scenario = SIM_SCENARIOS["quick" if quick else "full"]
         rec = simulate_to_disk(ROOT / scenario, tmp_path / "sim", seed=SIM_SEED, force=True)
         summary, metrics, elapsed = _run_and_evaluate(Path(rec), tmp_path / "out_sim")
         rows += _rows(f"simulated {Path(scenario).stem} (seed {SIM_SEED})", summary, metrics, elapsed,
-                      "issue 4: <= 1.5% of the outage distance at the end of the 5-min GNSS outage (here: % of the whole walk)")
+                      "target: <= 1.5% of the outage distance at the end of the 5-min GNSS outage (here: % of the whole walk)")
     return rows

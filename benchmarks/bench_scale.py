@@ -9,7 +9,7 @@ simulated by ``pdr.sim`` (not tiled); they are cached under ``out/bench/cache/``
 folder to simulate them again after a change of the simulator), so a second run skips the simulation (the 10-hour
 walk takes 3 to 7 minutes to simulate here and writes 0.3 GB). The cost measured does not depend on the walk's details.
 
-Issue 8 targets: 10 h end to end under 60 s with peak memory under 2 GB, cost linear in length; issue 9: 10 h at
+Targets: 10 h end to end under 60 s with peak memory under 2 GB, cost linear in length; 10 h at
 100 Hz imported, validated and run under 2 GB.
 
 Run: ``.venv/bin/python -m benchmarks scale`` (1 min, 10 min, 1 h, 10 h); ``--quick``: up to 1 h.
@@ -176,21 +176,21 @@ def run(quick: bool = False) -> list[dict]:
         if "1 h" in per_hour and longest != "1 h":
             rows.append(_row(f"{longest} against 1 h", "CPU per hour ratio (linearity)",
                              cpu_per_hour[longest] / cpu_per_hour["1 h"], "x", "about 1",
-                             "issue 8: cost linear in length"))
+                             "target: cost linear in length"))
         # import + validate of the longest recording
         rec = recs[longest]
         case = f"simulated walk, {longest} at 100 Hz"
         r = _measure(["validate", str(rec)])
         rows.append(_row(case, "pdr validate (wall, interpreter start included)", r["process_wall_s"], "s"))
         rows.append(_row(case, "pdr validate peak memory (VmHWM)", r["peak_mb"], "MB", f"< {TARGET_PEAK_MB:g}",
-                         "issue 9: import, validate, run of 10 h at 100 Hz under 2 GB"))
+                         "target: import, validate, run of 10 h at 100 Hz under 2 GB"))
         export = write_phyphox_export(rec, tmp_path / "phyphox_export")
         size_mb = sum(p.stat().st_size for p in export.iterdir()) / 1e6
         r = _measure(["import", "phyphox", str(export), str(tmp_path / "imported")])
         rows.append(_row(case, f"pdr import phyphox ({size_mb:.0f} MB of CSV; wall, interpreter start included)",
                          r["process_wall_s"], "s"))
         rows.append(_row(case, "pdr import phyphox peak memory (VmHWM)", r["peak_mb"], "MB", f"< {TARGET_PEAK_MB:g}",
-                         "issue 9: import, validate, run of 10 h at 100 Hz under 2 GB"))
+                         "target: import, validate, run of 10 h at 100 Hz under 2 GB"))
     return rows
 
 

@@ -43,7 +43,7 @@ def run(quick: bool = False) -> list[dict]:
         rec = load_recording(out)
     summ = rec.reference["summary"]
     rows.append(_row(name, "wall time to write the recording", round(elapsed, 2), "s", "< 10 (30 min walk)",
-                     "issue 2: a 30-minute walk in under 10 s"))
+                     "target: a 30-minute walk in under 10 s"))
     rows.append(_row(name, "simulated duration", summ["duration_s"], "s", "", ""))
     rows.append(_row(name, "true steps / distance", f"{summ['n_steps']} / {summ['distance_m']:.0f} m", "", "", ""))
     want, got = np.array(summ["segment_target_speed_mps"]), np.array(summ["segment_speed_mps"])
@@ -66,7 +66,7 @@ def run(quick: bool = False) -> list[dict]:
     sc["route"] = {"waypoints_m": [[0, 0], [150, 0], [150, 80], [0, 80]], "loop": True}
     truth = simulate(sc, seed=SEED).reference["gnss_truth"]
     rows.append(_row("GNSS 10% outliers of 50 m", "outlier fraction written", round(float(truth["outlier"].mean() * 100), 2),
-                     "%", "10", "issue 4: 10% of the fixes replaced by 50 m jumps"))
+                     "%", "10", "target: 10% of the fixes replaced by 50 m jumps"))
     # physics: specific force at rest, gyro over a 90 deg turn
     kin = WalkKinematics.steady(speed_mps=1.3, duration_s=5.0, seed=SEED, standing_s=2.0)
     f, _, _, _ = true_motion(SensorPose(kin, ImuSpec(placement="waist"), np.random.default_rng(0)), np.arange(0.0, 1.5, 0.01))

@@ -178,7 +178,7 @@ def _person_errors(height_m: float, cohort: str, seed: int,
 
 
 def _people_rows(quick: bool) -> list[dict]:
-    anchor = "issue 17: <= 5% per group; mobgap SlZijlstra on a kept-back MS walker: +7%"
+    anchor = "target: <= 5% per group; mobgap SlZijlstra on a kept-back MS walker: +7%"
     n = 2 if quick else 4
     tests = [(h, "healthy") for h in (1.50, 1.60, 1.70, 1.80, 1.95)] + [(1.70, "older"), (1.60, "impaired"), (1.75, "impaired")]
     groups = [("[tuning]", 1.75, "healthy", [0, 1])]  # other people in every group: seeds 10-13, 14-17, ...
@@ -450,7 +450,7 @@ def _graph_rows(tmp: Path, quick: bool) -> list[dict]:
     slopes = [r[2] for r in runs if r[2] is not None]
     case = (f"[test] pdr run on simulated walks with GNSS ({', '.join(RUN_SCENARIOS)}; {len(runs)} runs: body-based "
             f"default and --model population regression)")
-    anchor = "issue 17: 6 of 19 runs ended unconverged without a word; b = -0.218 m/Hz after sim_short"
+    anchor = "target: every unconverged run warns"
     return [_row(case, "runs unconverged; of them with a warning", f"{len(unconverged)}; {sum(r[1] for r in unconverged)}",
                  "runs", "all warned", anchor),
             _row(case, "calibrated regression slopes: negative; smallest", f"{sum(b < 0 for b in slopes)}; {min(slopes):.3f}",
@@ -473,7 +473,7 @@ def _speed_row(quick: bool) -> dict:
         model.estimate(with_signal_features(steps, imu))
         best = min(best, time.perf_counter() - t0)
     return _row(f"signal features + Zijlstra for 1 h at 100 Hz ({len(steps)} steps)", "time", round(best, 2), "s",
-                "< 1 s", "issue 3: detection + features for 1 h under 1 s")
+                "< 1 s", "target: detection + features for 1 h under 1 s")
 
 
 def run(quick: bool = False) -> list[dict]:

@@ -1,4 +1,4 @@
-"""Determinism (issue 9): the same input and configuration give byte-identical outputs, so users can diff runs.
+"""Determinism: the same input and configuration give byte-identical outputs, so users can diff runs.
 
 ``pdr simulate`` with a seed: every file identical. ``pdr run`` twice into the same OUT: every file identical
 (the plot included) except the wall-clock timings, which live only in ``summary.json``: ``timings_s`` (per stage)

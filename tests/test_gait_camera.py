@@ -17,13 +17,13 @@ from pdr.gait.camera_estimator import (
     FourierFormTemplates,
     ThighCameraModel,
     WearableCameraGaitEstimation,
-    _camera_in_body,
     ekf_update,
     joint_positions,
     most_likely_forms,
     predict,
     project_points,
 )
+from pdr.gait.camera_observation import _camera_in_body
 from pdr.sim.thigh_camera import FORM_SPEEDS_MPS, camera_poses, form_walk, simulate_thigh_camera, training_table
 from conftest import warns
 

@@ -1,4 +1,4 @@
-"""Walking forms (issue 7, part 1): Fourier fit, gait cycles, forms on simulated walks and shoe IMUs, CLI, bad input."""
+"""Walking forms: Fourier fit, gait cycles, forms on simulated walks and shoe IMUs, CLI, bad input."""
 
 from __future__ import annotations
 
@@ -167,9 +167,9 @@ def test_pendulum_speed_of_a_compass_gait_cycle():
 
 
 def test_each_walking_cycle_is_named_by_its_own_froude_number(sim_recs):
-    # regression (issue 7): k-means boundaries did not follow the Froude bands for people unseen in training (a fast
-    # walk with longer steps at a lower cadence fell into the walk form); a level walking cycle is now named by the
-    # Froude number of its inverted-pendulum speed, which needs only the leg length
+    # k-means boundaries alone do not follow the Froude bands for people unseen in training (a fast walk with longer
+    # steps at a lower cadence falls into the walk form); a level walking cycle is named by the Froude number of its
+    # inverted-pendulum speed, which needs only the leg length
     with collect_warnings():
         train, test = (recording_cycles(load_recording(p), {}) for p in sim_recs)
     forms = FourierGaitForms().fit(train)

@@ -1,4 +1,4 @@
-"""Issue 9, part 1 (audit): hostile archives, --force, temporary name + rename everywhere, data-only parsing.
+"""Hardening: hostile archives, --force, temporary name + rename everywhere, data-only parsing.
 
 What ``tests/test_importers.py`` already covers (``../``, absolute paths, a symbolic link, the compression ratio, the
 total-size limit, an existing recording without ``--force``) is not repeated here; this file adds the cases the

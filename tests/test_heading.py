@@ -134,7 +134,7 @@ def running_stretch(direction: float, *, rate: float = 100.0, step_hz: float = 2
 @pytest.mark.parametrize("direction", [0.3, 2.0, -2.5])
 def test_walking_direction_of_a_run_with_a_flight_phase(direction):
     """Running reverses the walking phase relation (the forward acceleration lags the vertical one by a quarter
-    step); the flight phase (0 g) tells the two gaits apart, so a run does not point backwards (issue 3)."""
+    step); the flight phase (0 g) tells the two gaits apart, so a run does not point backwards."""
     rate, step_hz = 100.0, 2.8
     a = running_stretch(direction, rate=rate, step_hz=step_hz)
     assert (gait_phase_sign(a[:, 2], rate, 1 / step_hz) == -1.0).all()

@@ -109,6 +109,27 @@ def test_oxford_optimisation_irregular_clock_passes(tmp_path):
     assert len(rec.imu) == 35236
 
 
+def test_foot_device_steps_make_the_feet_alternate():
+    from pdr.io.importers.oxford import foot_device_steps
+
+    right = np.array([0.0, 1.1, 2.2, 2.5, 3.3, 10.0])  # 2.5: the 2.2 contact bouncing; 10.0: after standing
+    left = np.array([0.55, 2.75, 10.6])  # the contact near 1.65 missed by the device
+    steps, dropped, added = foot_device_steps((right, left))
+    np.testing.assert_allclose(steps, [0.0, 0.55, 1.1, 1.65, 2.2, 2.75, 3.3, 10.0, 10.6])
+    assert (dropped, added) == (1, 1)
+    alternating = np.arange(20) * 0.5
+    assert len(foot_device_steps((alternating[::2], alternating[1::2]))[0]) == 20
+
+
+@pytest.mark.real_data("oxford_step_counter")
+def test_oxford_optimisation_foot_device_contacts_alternate(tmp_path):
+    paths, messages = _import("oxford", OXFORD / "optimisation" / "data" / "Samsung_Dario_Hard_FrontPocket_1", tmp_path)
+    summary = load_recording(paths[0]).reference["summary"]
+    assert summary["n_steps_device"] == 306  # upstream stats.csv
+    assert summary["n_steps"] == 306 - 6 + 15  # 6 bouncing contacts, 15 strides with the other foot's contact missed
+    assert any("6 bouncing contact(s) dropped, 15 missed" in m for m in messages)
+
+
 @pytest.fixture(scope="module")
 def mobgap_recs(tmp_path_factory):
     real_dataset("mobgap_lowerback_tvs_lab")
@@ -421,6 +442,67 @@ def test_other_apps_zip_mixed_exports_and_unknown_columns_refused(tmp_path, caps
     assert not (tmp_path / "out").exists()
 
 
+def _export(tmp_path: Path, parts: dict[str, str], drop: tuple[str, ...] = (), header: dict[str, str] | None = None) -> Path:
+    """A folder made of fixture exports: ``parts`` maps a subfolder ("" = the folder itself) to a fixture, ``drop``
+    removes files, ``header`` replaces a file's content."""
+    src = tmp_path / "export"
+    for sub, fixture in parts.items():
+        shutil.copytree(HAND / fixture, src / sub, dirs_exist_ok=True)
+    for name in drop:
+        (src / name).unlink()
+    for name, text in (header or {}).items():
+        (src / name).write_text(text)
+    return src
+
+
+BAD_EXPORTS = {
+    "sensorlogger no accelerometer": ("sensorlogger", {"": "sensorlogger_android"},
+                                      ("Accelerometer.csv", "TotalAcceleration.csv", "Gravity.csv"), None,
+                                      ("export", "expected a Sensor Logger export with Accelerometer.csv", "Gyroscope.csv")),
+    "phyphox no accelerometer": ("phyphox", {"": "phyphox_multi"}, ("Accelerometer.csv", "Linear Accelerometer.csv"), None,
+                                 ("export", "expected a phyphox export with acceleration including gravity", "Gyroscope.csv")),
+    "sensorlogger given phyphox's zip": ("sensorlogger", {"": "phyphox_multi"}, (), None,
+                                         ("export.zip", "expected a Sensor Logger export, found a phyphox export",
+                                          "pdr import phyphox")),
+    "phyphox given sensor logger's zip": ("phyphox", {"": "sensorlogger_android"}, (), None,
+                                          ("export.zip", "expected a phyphox export, found a Sensor Logger export",
+                                           "pdr import sensorlogger")),
+    "sensorlogger two exports": ("sensorlogger", {"a": "sensorlogger_android", "b": "sensorlogger_ios"}, (), None,
+                                 ("export", "expected one Sensor Logger export, found 2 (a, b)")),
+    "phyphox two exports": ("phyphox", {"a": "phyphox_multi", "b": "phyphox_custom"}, (), None,
+                            ("export", "expected one phyphox export, found 2 (a, b)")),
+    "sensorlogger files mixed with phyphox's": ("sensorlogger", {"": "sensorlogger_ios", "x": "phyphox_multi"}, (), None,
+                                                ("export", "expected one export per folder", "Pressure.csv")),
+    "phyphox files mixed with sensor logger's": ("phyphox", {"": "phyphox_custom", "x": "sensorlogger_ios"}, (), None,
+                                                 ("export", "expected one export per folder", "Gravity.csv")),
+    "sensorlogger unknown columns": ("sensorlogger", {"": "sensorlogger_android"}, (),
+                                     {"TotalAcceleration.csv": "when,a,b,c\n1,2,3,4\n"},
+                                     ("TotalAcceleration.csv", "expected Sensor Logger columns time, x, y, z", "when, a, b, c")),
+    "phyphox unknown columns": ("phyphox", {"": "phyphox_multi"}, (), {"Accelerometer.csv": "when,a,b,c\n1,2,3,4\n"},
+                                ("Accelerometer.csv", "expected phyphox columns", "when, a, b, c")),
+}
+
+
+@pytest.mark.parametrize("case", list(BAD_EXPORTS))
+def test_bad_phone_exports_one_error_line_naming_the_file_nothing_written(tmp_path, capsys, case):
+    """Each bad input of a phone export, through ``main(argv)``: one ``error:`` line naming the user's file or
+    folder and what was expected, exit 1, no output folder."""
+    fmt, parts, drop, header, words = BAD_EXPORTS[case]
+    src = _export(tmp_path, parts, drop, header)
+    if "zip" in case:
+        src = _zip_folder(src, tmp_path / "export.zip")
+    if "mixed" in case:  # the other app's files copied into the export folder itself
+        for p in sorted((src / "x").iterdir()):
+            if p.is_file() and not (src / p.name).exists():
+                shutil.move(p, src / p.name)
+        shutil.rmtree(src / "x")
+    rc, out, err = _cli(["import", fmt, src, tmp_path / "out"], capsys)
+    _assert_one_error(rc, err)
+    for w in words:
+        assert w in err, (w, err)
+    assert not (tmp_path / "out").exists() and out == ""
+
+
 def test_sensorlogger_without_gravity_is_refused(tmp_path):
     src = tmp_path / "export"
     shutil.copytree(HAND / "sensorlogger_ios", src)
@@ -442,6 +524,17 @@ def test_phyphox_folder_zip_and_decimal_comma(tmp_path):
     pd.testing.assert_frame_equal(zipped.imu, rec.imu)
     semi = load_recording(_import("phyphox", HAND / "phyphox_rawdata_semicolon", tmp_path / "c")[0][0])
     np.testing.assert_allclose(semi.imu["acc_y_mps2"], acc["Y (m/s^2)"].dropna(), rtol=1e-8)
+
+
+def test_phyphox_tab_separated_export(tmp_path):
+    """phyphox's "Tabulator" export: the same quoted headers, tab-separated, ending without a line break."""
+    src = tmp_path / "tabs"
+    shutil.copytree(HAND / "phyphox_multi", src)
+    for path in sorted(src.glob("*.csv")):
+        path.write_bytes(path.read_bytes().replace(b'","', b'"\t"').replace(b",", b"\t"))
+    rec = load_recording(_import("phyphox", src, tmp_path / "a")[0][0])
+    comma = load_recording(_import("phyphox", HAND / "phyphox_multi", tmp_path / "b")[0][0])
+    pd.testing.assert_frame_equal(rec.imu, comma.imu)
 
 
 def test_phyphox_linear_only_and_g_units_are_refused(tmp_path, capsys):

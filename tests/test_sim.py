@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import copy
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -14,6 +15,7 @@ from pdr.constants import GRAVITY_MPS2
 from pdr.errors import InputError
 from pdr.geo import latlon_to_en
 from pdr.io.recording import load_recording
+from pdr.io.tomlio import read_toml
 from pdr.sim import WalkKinematics, simulate, simulate_to_disk
 from pdr.sim.sensors import ImuSpec, SensorPose, true_motion
 from pdr.sim.simulator import build_walk, parse_scenario
@@ -358,3 +360,31 @@ def _simulate_and_save(scenario: dict, out: Path) -> Path:
 
     with tempfile.TemporaryDirectory() as tmp:
         return save_recording(simulate(scenario, seed=3, workdir=Path(tmp)), out)
+
+
+def test_phone_taken_out_of_and_put_back_into_the_pocket():
+    """``in_pocket_s``: the hand phone rides in the pocket (the pocket placement's pose) inside the intervals, in
+    the hand away from the moves, and turns against gravity between them; ``reference/handling.csv`` holds the moves."""
+    raw = read_toml(Path(__file__).resolve().parents[1] / "configs" / "sim" / "phone_pocket_handling.toml")
+    sc = parse_scenario(raw)
+    kin = build_walk(sc, 3)
+    spec = sc.imus[0]
+    t = np.arange(0.0, 20.0, 0.01)
+    pos, rot = SensorPose(kin, spec, np.random.default_rng(0))(t)
+    p_pocket, r_pocket = SensorPose(kin, ImuSpec(placement="pocket"), np.random.default_rng(0))(t)
+    p_hand, r_hand = SensorPose(kin, dataclasses.replace(spec, in_pocket_s=()), np.random.default_rng(0))(t)
+    pocket, hand = t <= 0.5, (t >= 2.3) & (t <= 16.8)
+    np.testing.assert_allclose(pos[pocket], p_pocket[pocket], atol=1e-9)
+    np.testing.assert_allclose(rot[pocket], r_pocket[pocket], atol=1e-9)
+    np.testing.assert_allclose(pos[hand], p_hand[hand], atol=1e-9)
+    np.testing.assert_allclose(rot[hand], r_hand[hand], atol=1e-9)
+    up = rot[:, 2, :]  # the world's up axis in the phone frame
+    assert np.degrees(np.arccos(up[0] @ up[int(3.0 / 0.01)])) > 30.0
+    f, _, _, _ = true_motion(SensorPose(kin, spec, np.random.default_rng(0)), t)
+    assert np.isfinite(f).all() and np.abs(np.linalg.norm(f, axis=1) - GRAVITY_MPS2).max() < 3 * GRAVITY_MPS2
+    rec = simulate(raw, seed=3)
+    handling = rec.reference["handling"]
+    assert handling["action"].tolist() == ["take_out", "put_away"]
+    np.testing.assert_allclose(handling[["t_start_s", "t_end_s"]].to_numpy(), [[0.5, 2.3], [16.8, 18.6]])
+    with pytest.raises(InputError, match="in_pocket_s"):
+        ImuSpec(placement="waist", in_pocket_s=((0.0, 1.0),))

@@ -1,7 +1,8 @@
-"""Step detection, walking bouts, per-step features and ``pdr steps`` (the steps table of INTERFACES.md)."""
+"""Step detection, walking bouts, per-step features and ``pdr steps`` (the steps table of CONTRACT.md)."""
 
 from __future__ import annotations
 
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -338,3 +339,59 @@ def test_oxford_count_regression(position):
     with collect_warnings():
         n = len(WaveletStepDetection().detect(imu).steps_)
     assert abs(n - n_true) <= 0.02 * n_true, (n, n_true)
+
+
+HANDLING_SCENARIO = Path(__file__).resolve().parents[1] / "configs" / "sim" / "phone_pocket_handling.toml"
+
+
+def test_phone_handling_at_the_bout_edges_is_left_out():
+    """The phone taken out of the pocket before the walk and put back after (the simulator's ``in_pocket_s``): the
+    handling is found where it happened, its maxima are not steps, and the walk's own steps stay."""
+    from pdr.io.tomlio import read_toml
+    from pdr.steps.handling import AttitudeHandlingDetection
+    from pdr.signals import uniform_imu
+
+    rec = simulate(read_toml(HANDLING_SCENARIO), seed=123)
+    truth = rec.reference["handling"][["t_start_s", "t_end_s"]].to_numpy()
+    found = AttitudeHandlingDetection().detect(uniform_imu(rec.imu)).intervals_
+    assert len(found) == 2
+    for (a, b), (c, d) in zip(truth, found[["t_start_s", "t_end_s"]].to_numpy()):
+        assert c < b and d > a  # overlapping the true move
+    n_true = len(rec.reference["steps"])
+    kept = WaveletStepDetection(leave_out_handling=True).detect(rec.imu)
+    counted_all = len(WaveletStepDetection().detect(rec.imu).steps_)
+    assert counted_all >= n_true + 4  # the hand's movements taken for steps
+    assert abs(len(kept.steps_) - n_true) <= 1
+    t = kept.steps_["t_s"].to_numpy()
+    assert not any(((t > a) & (t < b)).any() for a, b in truth)
+    pd.testing.assert_frame_equal(kept.handling_, found)
+    np.testing.assert_allclose(kept.left_out_[["t_start_s", "t_end_s"]], found[["t_start_s", "t_end_s"]])
+    assert kept.left_out_["n_maxima"].sum() >= 4
+    with warns(match=r"the phone was handled at .* s, .* s .*not counted as steps"):
+        assert len(detect_steps(rec, {})) == len(kept.steps_)  # on for a phone in the hand
+    assert make_detector(None, "waist").leave_out_handling is False  # a strapped sensor is not handled
+
+
+def test_phone_handled_while_walking_on_keeps_its_steps():
+    """Taken out of the pocket and put back while the walker walks on: walking on both sides, the steps stay."""
+    sc = {"route": {"waypoints_m": [[0.0, 0.0], [300.0, 0.0]], "loop": False},
+          "segment": [{"duration_s": 2.0, "speed_mps": 0.0}, {"duration_s": 22.0, "speed_mps": 1.3},
+                      {"duration_s": 2.0, "speed_mps": 0.0}],
+          "imu": [{"placement": "hand", "rate_hz": 100.0, "handling_s": 2.0, "in_pocket_s": [[0.0, 7.0], [17.0, 30.0]]}],
+          "gnss": {"enabled": False}}
+    rec = simulate(sc, seed=104)
+    det = WaveletStepDetection(leave_out_handling=True).detect(rec.imu)
+    assert len(det.handling_) >= 2  # both moves seen
+    assert len(det.steps_) == len(WaveletStepDetection().detect(rec.imu).steps_) and det.left_out_.empty
+    assert abs(len(det.steps_) - len(rec.reference["steps"])) <= 2
+
+
+def test_steady_walks_have_no_handling():
+    from pdr.signals import uniform_imu
+    from pdr.steps.handling import AttitudeHandlingDetection
+
+    for placement in ("hand", "pocket", "waist"):
+        rec = simulate({"route": {"waypoints_m": [[0.0, 0.0], [60.0, 0.0], [60.0, 60.0]], "loop": True},
+                        "segment": [{"duration_s": 3.0, "speed_mps": 0.0}, {"duration_s": 40.0, "speed_mps": 1.2}],
+                        "imu": [{"placement": placement}], "gnss": {"enabled": False}}, seed=1)
+        assert AttitudeHandlingDetection().detect(uniform_imu(rec.imu)).intervals_.empty, placement

@@ -1,4 +1,4 @@
-"""Stride sources calibrated by GNSS inside the fusion: a length scale per source (prior 1), issue 4 follow-up."""
+"""Stride sources calibrated by GNSS inside the fusion: a length scale per source (prior 1)."""
 
 from __future__ import annotations
 
@@ -37,7 +37,7 @@ def test_a_short_stride_source_is_scaled_back_with_gnss(walk):
     assert 0.005 < scale["std"] < 0.03
     assert abs(path_m(fused) / truth - 1) < 0.02
     assert abs(path_m(fused) / truth - 1) < 0.3 * abs(path_m(plain) / truth - 1)
-    # whatever GNSS says (on some walks GNSS and steps are off by a few %), the strides now agree with it
+    # whatever GNSS says (on some walks GNSS and steps are off by a few %), the scaled strides agree with it
     gnss_only = FactorGraphFusion().fuse(walk["steps"], gnss=walk["gnss"])
     assert path_m(fused) == pytest.approx(path_m(gnss_only), rel=0.015)
     assert fused.solver_["stride_scales_calibrated"]

@@ -330,7 +330,9 @@ class FactorGraphFusion(Algorithm):
 
     # ------------------------------------------------------------------------------------------------------------
     def _check_params(self) -> None:
-        if self.gnss_factor not in GNSS_FACTORS:
+        """Check the parameters this class has (an :class:`IncrementalFusion` has a subset)."""
+        own = set(self.param_names())
+        if "gnss_factor" in own and self.gnss_factor not in GNSS_FACTORS:
             raise InputError(f"gnss_factor: expected one of {', '.join(GNSS_FACTORS)}, found {self.gnss_factor!r}")
         positive = ["default_step_length_std_m", "default_heading_change_std_rad", "lateral_std_m", "default_h_acc_m",
                     "huber_k", "gnss_gate_chi2", "gyro_bias_knot_s", "gyro_bias_rw_radps_per_sqrt_s",
@@ -339,11 +341,11 @@ class FactorGraphFusion(Algorithm):
                     "prior_c_std_m_per_m2ps4", "max_step_duration_s", "gap_speed_std_mps", "stride_scale_prior_std",
                     "step_scale_prior_std",
                     "gnss_correlated_std_m", "gnss_correlation_s"]
-        for name in positive:
+        for name in [n for n in positive if n in own]:
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and np.isfinite(value) and value > 0):
                 raise InputError(f"{type(self).__name__} {name}: expected a number > 0, found {value!r}")
-        for name in ("max_alternations", "max_rejected_run"):
+        for name in [n for n in ("max_alternations", "max_rejected_run") if n in own]:
             value = getattr(self, name)
             if not (isinstance(value, int) and value >= 1):
                 raise InputError(f"{type(self).__name__} {name}: expected an integer >= 1, found {value!r}")
@@ -380,8 +382,6 @@ class FactorGraphFusion(Algorithm):
         self.mag_deviation_rad_ = np.zeros(0)
         self.mag_deviation_coef_ = np.zeros(deviation_design(np.zeros(1)).shape[1])
         self.stride_scales_ = {}
-        self.step_scale_ = {"scale": 1.0, "std": self.step_scale_prior_std, "prior_std": self.step_scale_prior_std,
-                            "calibrated": False}
         self.solver_ = {"method": "levenberg_marquardt", "iterations": 0, "alternations": 0, "final_error": 0.0,
                         "time_s": 0.0, "marginals_time_s": 0.0, "gnss_used": 0, "gnss_rejected": 0, "converged": True,
                         "last_change_m": 0.0}
@@ -396,6 +396,8 @@ class FactorGraphFusion(Algorithm):
         self._check_params()
         problem = self._prepare(steps, gnss, strides, t_start_s)
         if problem is None:
+            self.step_scale_ = {"scale": 1.0, "std": self.step_scale_prior_std, "prior_std": self.step_scale_prior_std,
+                                "calibrated": False}
             return self._empty(gnss, step_model)
         n = problem.n_steps
         n_fix = len(problem.gnss_row)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import inspect
 import time
 
 import gtsam
@@ -13,6 +14,8 @@ from pdr.fusion import factors
 from pdr.fusion._inputs import empty_trajectory
 from pdr.fusion._linear import deviation_design
 from pdr.fusion.graph import FactorGraphFusion, trajectory_frame, with_deep_stack
+
+_BATCH = inspect.signature(FactorGraphFusion.__init__).parameters  # the shared parameters take the batch defaults
 
 
 class IncrementalFusion(FactorGraphFusion):
@@ -34,14 +37,22 @@ class IncrementalFusion(FactorGraphFusion):
     stride_scales
         Length scale per stride source (``{"leg_camera": 1.08}``, e.g. the ``scale`` of an earlier batch run's
         ``stride_scales_``): each stride's length is multiplied by its source's scale. Default: 1 for every source.
-    All parameters of :class:`~pdr.fusion.FactorGraphFusion` are accepted; the step model, heading-rate bias,
-    magnetometer deviation and stride scales are *not* re-estimated here (a navigation run uses a calibration, e.g.
-    from ``pdr calibrate`` or an earlier batch run): step lengths are the table's ``step_length_m``.
+    stride_scale_prior_std, stride_scale_prior_std_by_source
+        The stds reported with the given scales in ``stride_scales_`` (as :class:`~pdr.fusion.FactorGraphFusion`).
+    default_step_length_std_m, default_heading_change_std_rad, lateral_std_m, default_h_acc_m, gnss_time_tolerance_s
+        As :class:`~pdr.fusion.FactorGraphFusion` (same defaults).
+    huber_k, gnss_gate_chi2, max_rejected_run, max_step_duration_s, gap_speed_std_mps
+        As :class:`~pdr.fusion.FactorGraphFusion` (same defaults). The step model, heading-rate bias, magnetometer
+        deviation and stride scales are *not* re-estimated here (a navigation run uses a calibration, e.g. from
+        ``pdr calibrate`` or an earlier batch run): step lengths are the table's ``step_length_m``, and the batch
+        fusion's calibration parameters do not apply.
 
     Attributes
     ----------
     trajectory_, step_model_ (the given model), step_length_m_, gnss_used_ (causal gate), solver_
         As :class:`~pdr.fusion.FactorGraphFusion`; ``solver_["time_per_step_ms"]`` is the mean update time.
+    gyro_bias_radps_, mag_deviation_coef_, mag_deviation_rad_
+        The given calibration (``gyro_bias_radps`` at every step, ``mag_deviation_coef`` and the deviation it gives).
     stride_scales_ : dict
         As :class:`~pdr.fusion.FactorGraphFusion`, with the given scales (``calibrated`` False, ``std`` the prior's).
     smoothed_trajectory_ : DataFrame
@@ -60,21 +71,37 @@ class IncrementalFusion(FactorGraphFusion):
     """
 
     def __init__(self, *, relinearize_threshold: float = 0.1, relinearize_skip: int = 10, wildfire_threshold: float = 0.01,
-                 gyro_bias_radps: float = 0.0,
-                 mag_deviation_coef: list[float] | None = None, stride_scales: dict[str, float] | None = None,
-                 **kwargs):
-        super().__init__(**kwargs)
+                 gyro_bias_radps: float = 0.0, mag_deviation_coef: list[float] | None = None,
+                 stride_scales: dict[str, float] | None = None,
+                 default_step_length_std_m: float = _BATCH["default_step_length_std_m"].default,
+                 default_heading_change_std_rad: float = _BATCH["default_heading_change_std_rad"].default,
+                 lateral_std_m: float = _BATCH["lateral_std_m"].default,
+                 default_h_acc_m: float = _BATCH["default_h_acc_m"].default,
+                 gnss_time_tolerance_s: float = _BATCH["gnss_time_tolerance_s"].default,
+                 huber_k: float = _BATCH["huber_k"].default, gnss_gate_chi2: float = _BATCH["gnss_gate_chi2"].default,
+                 max_rejected_run: int = _BATCH["max_rejected_run"].default,
+                 stride_scale_prior_std: float = _BATCH["stride_scale_prior_std"].default,
+                 stride_scale_prior_std_by_source: dict[str, float] | None = _BATCH["stride_scale_prior_std_by_source"].default,
+                 max_step_duration_s: float = _BATCH["max_step_duration_s"].default,
+                 gap_speed_std_mps: float = _BATCH["gap_speed_std_mps"].default):
         self.relinearize_threshold = relinearize_threshold
         self.relinearize_skip = relinearize_skip
         self.wildfire_threshold = wildfire_threshold
         self.gyro_bias_radps = gyro_bias_radps
         self.mag_deviation_coef = mag_deviation_coef
         self.stride_scales = stride_scales
-
-    @classmethod
-    def param_names(cls) -> list[str]:
-        return ["relinearize_threshold", "relinearize_skip", "wildfire_threshold", "gyro_bias_radps", "mag_deviation_coef",
-                "stride_scales", *FactorGraphFusion.param_names()]
+        self.default_step_length_std_m = default_step_length_std_m
+        self.default_heading_change_std_rad = default_heading_change_std_rad
+        self.lateral_std_m = lateral_std_m
+        self.default_h_acc_m = default_h_acc_m
+        self.gnss_time_tolerance_s = gnss_time_tolerance_s
+        self.huber_k = huber_k
+        self.gnss_gate_chi2 = gnss_gate_chi2
+        self.max_rejected_run = max_rejected_run
+        self.stride_scale_prior_std = stride_scale_prior_std
+        self.stride_scale_prior_std_by_source = stride_scale_prior_std_by_source
+        self.max_step_duration_s = max_step_duration_s
+        self.gap_speed_std_mps = gap_speed_std_mps
 
     def fuse(self, steps: pd.DataFrame, *, gnss: pd.DataFrame | None = None, strides: pd.DataFrame | None = None,
              step_model=None, t_start_s: float | None = None) -> IncrementalFusion:

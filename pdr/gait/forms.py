@@ -238,6 +238,8 @@ class FourierGaitForms(Algorithm):
         step_freq_hz, duration_s, min_acc_v_mps2`` (medians over the form's training cycles).
     transition_counts_, transition_ : (n_forms, n_forms) counts and row probabilities of form j following form i.
     labels_ : form id of each training cycle (after :meth:`fit`) or of each classified cycle (after :meth:`classify`).
+    distance_ : after :meth:`classify`: each cycle's distance to its form's centroid (the ``distance`` below).
+    leg_length_used_m_ : the leg length the form kinds were named with (``leg_length_m``, the cycles' or the default).
     cycles_forms_ : after :meth:`classify`: ``t_start_s, t_end_s, form, form_id, kind, distance, source``
         (``distance``: to the nearest centroid in the standardised PCA space; ``kind``: the form's, or the cycle's own
         speed name with ``cycle_speed_check``, or turning with ``cycle_turn_check``).

@@ -41,6 +41,7 @@ REFERENCE_TABLES = {
     "trajectory": ("t_s", "e_m", "n_m"),
     "landmarks": ("t_s", "e_m", "n_m"),
     "bouts": ("t_start_s", "t_end_s"),
+    "handling": ("t_start_s", "t_end_s", "action"),
 }
 VIDEO_NAMES = ("video.avi", "video.mp4")
 
@@ -60,7 +61,7 @@ SUBJECT_RANGES = {
     "height_m": (0.5, 2.5), "mass_kg": (2.0, 350.0), "leg_length_m": (0.2, 1.4), "sensor_height_m": (0.0, 2.5),
     "thigh_length_m": (0.1, 0.7), "shank_length_m": (0.1, 0.7), "foot_length_m": (0.05, 0.4),
 }
-REFERENCE_TEXT_COLUMNS = ("foot", "mechanics_source")  # every other column of a reference table holds numbers
+REFERENCE_TEXT_COLUMNS = ("foot", "mechanics_source", "action")  # every other column of a reference table holds numbers
 
 
 @dataclasses.dataclass

@@ -33,6 +33,7 @@ from pathlib import Path
 from typing import Any, Iterable, Iterator
 
 import pandas as pd
+from tqdm import tqdm
 
 from pdr.errors import InputError, collect_warnings
 from pdr.io.importers._common import safe_id
@@ -111,26 +112,21 @@ def _completed_row(given: str, out_dir: Path) -> dict[str, Any]:
 
 
 class _Progress:
-    """A one-line progress counter on stderr when it is a terminal; silent otherwise."""
+    """A one-line progress bar (tqdm) on stderr when it is a terminal; silent otherwise."""
 
     def __init__(self, total: int, stream=None):
-        self.stream = stream if stream is not None else sys.stderr
-        self.total, self.done, self.failed, self.t0 = total, 0, 0, time.perf_counter()
-        self.enabled = total > 0 and self.stream.isatty()
+        stream = stream if stream is not None else sys.stderr
+        self.failed = 0
+        self.bar = tqdm(total=total, file=stream, unit="recording", dynamic_ncols=True,
+                        disable=total == 0 or not stream.isatty())
 
     def tick(self, row: dict[str, Any]) -> None:
-        self.done += 1
-        self.failed += row["status"] == "failed"
-        if self.enabled:
-            elapsed = time.perf_counter() - self.t0
-            eta = elapsed / self.done * (self.total - self.done)
-            width = 30
-            bar = "#" * round(width * self.done / self.total)
-            failed = f", {self.failed} failed" if self.failed else ""
-            print(f"\r[{bar:<{width}}] {self.done}/{self.total}{failed}, {elapsed:.0f} s elapsed, about {eta:.0f} s left ",
-                  end="", file=self.stream, flush=True)
-            if self.done == self.total:
-                print(file=self.stream, flush=True)
+        if row["status"] == "failed":
+            self.failed += 1
+            self.bar.set_postfix_str(f"{self.failed} failed", refresh=False)
+        self.bar.update(1)
+        if self.bar.n == self.bar.total:
+            self.bar.close()
 
 
 def _pandas_one_thread():

@@ -24,12 +24,14 @@ def empty_steps_table() -> pd.DataFrame:
 
 
 TRUNK_PLACEMENTS = ("waist", "trunk", "head")  # sensors that see every step: the gait period is never a stride
+PHONE_PLACEMENTS = ("hand", "pocket", "bag", "arm", "neck", "unknown")  # where a phone is carried, taken out, put away
 
 
 def make_detector(section: dict | None, placement: str = "unknown"):
     """The ``[steps]`` section: ``method = "wavelet" | "peak"`` (default wavelet) plus that detector's parameters.
 
-    For a trunk placement the wavelet detector's ``stride_check`` defaults to False (unless the section sets it).
+    For a trunk placement the wavelet detector's ``stride_check`` defaults to False, and for a phone placement its
+    ``leave_out_handling`` to True (a strapped sensor is not handled), unless the section sets them.
     """
     section = dict(section or {})
     method = section.pop("method", "wavelet")
@@ -37,6 +39,8 @@ def make_detector(section: dict | None, placement: str = "unknown"):
         raise InputError(f"configuration [steps]: expected method one of {', '.join(DETECTORS)}, found {method!r}")
     if method == "wavelet" and placement in TRUNK_PLACEMENTS:
         section.setdefault("stride_check", False)
+    if method == "wavelet" and placement in PHONE_PLACEMENTS:
+        section.setdefault("leave_out_handling", True)
     return DETECTORS[method].from_config(section)
 
 
@@ -65,6 +69,11 @@ def steps_table(rec: Recording, detector, heading: AttitudeStepHeading, signals:
         warn(f"{rec.id}: sampling rate {u.rate_hz:.1f} Hz is low (< {LOW_RATE_HZ:g} Hz): contact times are "
              f"only good to about {1e3 / u.rate_hz:.0f} ms")
     detector.detect(u)
+    left_out = getattr(detector, "left_out_", None)
+    if left_out is not None and len(left_out):
+        spans = ", ".join(f"{r.t_start_s:.1f}-{r.t_end_s:.1f} s" for r in left_out.itertuples())
+        warn(f"{rec.id}: the phone was handled at {spans} (its attitude turned at a walking bout's edge): "
+             f"{int(left_out['n_maxima'].sum())} acceleration peak(s) there not counted as steps")
     steps = detector.steps_.sort_values("t_s", kind="stable").reset_index(drop=True)
     if len(steps) == 0:
         warn(f"{rec.id}: no walking found, no steps")

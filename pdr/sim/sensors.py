@@ -18,7 +18,7 @@ from scipy.spatial.transform import Rotation
 
 from pdr.constants import GRAVITY_MPS2
 from pdr.errors import InputError
-from pdr.sim.gait import WalkKinematics, rotation_zyx
+from pdr.sim.gait import WalkKinematics, _smoothstep, rotation_zyx
 
 WAIST_ABOVE_HIP_PER_HEIGHT = 0.08  # lower-back sensor height minus hip height, per body height (see below)
 
@@ -48,7 +48,9 @@ class ImuSpec:
     ``gyr_noise_radps`` (1-sigma per sample), constant bias spreads ``acc_bias_mps2`` / ``gyr_bias_radps``
     (1-sigma of the draw), ``gyr_bias_walk_radps_per_sqrt_s`` (random walk), ``magnetometer`` and ``barometer``
     (columns on or off), ``mag_noise_ut``, ``mag_hard_iron_ut``, ``hand_yaw_offset_deg`` (phone in hand: yaw
-    between the phone's forward axis and the walking direction), ``hand_tilt_deg`` (screen tilt towards the face).
+    between the phone's forward axis and the walking direction), ``hand_tilt_deg`` (screen tilt towards the face),
+    ``in_pocket_s`` (phone in hand: [start, end] intervals in which it is in the trouser pocket instead; it is put away
+    over the ``handling_s`` before each and taken out over the ``handling_s`` after each, see :func:`handling_intervals`).
     Defaults are those of a consumer MEMS unit (angle random walk ~1.4 deg/sqrt(h), turn-on bias ~0.1 deg/s, bias
     random walk 1e-5 rad/s/sqrt(s), accelerometer bias ~0.05 m/s²).
     """
@@ -67,10 +69,18 @@ class ImuSpec:
     baro_noise_hpa: float = 0.03
     hand_yaw_offset_deg: float = 12.0
     hand_tilt_deg: float = 35.0
+    in_pocket_s: tuple = ()
+    handling_s: float = 2.0
 
     def __post_init__(self):
         if self.placement not in IMU_PLACEMENTS:
             raise InputError(f"imu.placement: expected one of {', '.join(IMU_PLACEMENTS)}, found {self.placement!r}")
+        if self.in_pocket_s and self.placement != "hand":
+            raise InputError(f"imu.in_pocket_s: expected only for a phone in the hand, found placement {self.placement!r}")
+        if not 0.5 <= self.handling_s <= 10.0:
+            raise InputError(f"imu.handling_s: expected 0.5-10 s, found {self.handling_s}")
+        if any(len(iv) != 2 or not 0 <= iv[0] < iv[1] for iv in self.in_pocket_s):
+            raise InputError(f"imu.in_pocket_s: expected [start, end] pairs with 0 <= start < end, found {list(self.in_pocket_s)}")
         if not 10.0 <= self.rate_hz <= 2000.0:
             raise InputError(f"imu.rate_hz: expected 10-2000 Hz, found {self.rate_hz}")
         for f in dataclasses.fields(self):
@@ -87,13 +97,70 @@ def _smooth_random(rng: np.random.Generator, t: np.ndarray, amplitude: float, pe
     return amplitude * out * np.sqrt(2.0 / len(periods_s))
 
 
+def handling_intervals(spec: ImuSpec, duration_s: float) -> pd.DataFrame:
+    """``reference/handling.csv`` of a phone in the hand: ``t_start_s, t_end_s, action`` (``put_away`` over the
+    ``handling_s`` before each ``in_pocket_s`` interval, ``take_out`` over the ``handling_s`` after it), within the recording."""
+    rows = []
+    for a, b in spec.in_pocket_s:
+        for t0, action in ((a - spec.handling_s, "put_away"), (b, "take_out")):
+            lo, hi = max(t0, 0.0), min(t0 + spec.handling_s, duration_s)
+            if hi > lo:
+                rows.append((lo, hi, action))
+    return pd.DataFrame(sorted(rows), columns=["t_start_s", "t_end_s", "action"])
+
+
 class SensorPose:
-    """Position and orientation (sensor -> world) of a sensor at a placement, at any times."""
+    """Position and orientation (sensor -> world) of a sensor at a placement, at any times.
+
+    A phone in the hand with ``in_pocket_s`` intervals rides in the left trouser pocket during them (the pocket
+    placement's pose) and moves between pocket and hand over ``handling_s`` (a minimum-jerk blend of the two poses,
+    the quintic ramp of a reach, Flash & Hogan 1985:
+    positions interpolated, the rotation from pocket to hand followed along its geodesic), fumbled on the way: a
+    smooth random offset of about 3 cm and turn of about 30° that vanish at both ends (the fingers gripping, turning
+    the phone to find its screen).
+    """
 
     def __init__(self, kin: WalkKinematics, spec: ImuSpec, rng: np.random.Generator):
         self.kin, self.spec = kin, spec
         # the phone's own slow motions in the hand (fixed at construction, so any times can be asked)
         self._sway_seed = int(rng.integers(2**31))
+
+    def _hand(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        kin, spec = self.kin, self.spec
+        rng = np.random.default_rng(self._sway_seed)
+        psi = kin.route.heading_rad(kin.pelvis_state(t)["s_m"])
+        sway = [_smooth_random(rng, t, a) for a in (0.02, 0.015, 0.015)]
+        d_yaw, d_tilt, d_roll = (np.radians(_smooth_random(rng, t, a)) for a in (3.0, 3.0, 2.0))
+        zero = np.zeros_like(t)
+        local = np.stack([0.38 + sway[0], -0.12 + sway[1], 0.30 + sway[2]], -1)  # before the chest, right hand
+        pos = kin.pelvis_position_m(t) + np.einsum("nij,nj->ni", rotation_zyx(psi, zero, zero), local)
+        yaw = rotation_zyx(psi + np.radians(spec.hand_yaw_offset_deg) + d_yaw, zero, zero)
+        tilt = Rotation.from_rotvec(np.stack([np.radians(spec.hand_tilt_deg) + d_tilt, zero, d_roll], -1)).as_matrix()
+        return pos, yaw @ _PHONE_IN_BODY @ tilt
+
+    def _pocket(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        j, rot = self.kin.segment_pose(t, "thigh_left")
+        pos = j["hip_left"] + np.einsum("nij,j->ni", rot, np.array([0.07, 0.0, 0.3 * self.kin.body.thigh_m]))
+        return pos, rot @ _POCKET_IN_THIGH
+
+    def _handled(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The hand pose, the pocket pose during ``in_pocket_s`` and the moves between them."""
+        h = self.spec.handling_s
+        w = np.ones_like(t)  # 1: in the hand, 0: in the pocket
+        for a, b in self.spec.in_pocket_s:
+            w *= 1.0 - _smoothstep((t - (a - h)) / h) * (1.0 - _smoothstep((t - b) / h))
+        pos, rot = self._hand(t)
+        if (w < 1.0).any():
+            p_pocket, r_pocket = self._pocket(t)
+            rel = Rotation.from_matrix(np.einsum("nji,njk->nik", r_pocket, rot)).as_rotvec()
+            rng = np.random.default_rng([self._sway_seed, 1])
+            envelope = (4.0 * w * (1.0 - w)) ** 2
+            fumble = np.stack([_smooth_random(rng, t, 0.03, (0.6, 1.1, 1.9)) for _ in range(3)], -1)
+            turn = np.stack([np.radians(_smooth_random(rng, t, 30.0, (0.8, 1.5, 2.6))) for _ in range(3)], -1)
+            pos = p_pocket + w[:, None] * (pos - p_pocket) + envelope[:, None] * fumble
+            rot = r_pocket @ Rotation.from_rotvec(w[:, None] * rel).as_matrix() @ \
+                Rotation.from_rotvec(envelope[:, None] * turn / np.sqrt(3.0)).as_matrix()
+        return pos, rot
 
     def __call__(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         kin, spec = self.kin, self.spec
@@ -103,20 +170,9 @@ class SensorPose:
             # on the lower back (L4-L5, a belt): behind and above the hip joints
             return kin.pelvis_position_m(t) + rot @ np.array([-0.10, 0.0, waist_sensor_above_hip_m(kin.body)]), rot
         if place == "hand":
-            rng = np.random.default_rng(self._sway_seed)
-            psi = kin.route.heading_rad(kin.pelvis_state(t)["s_m"])
-            sway = [_smooth_random(rng, t, a) for a in (0.02, 0.015, 0.015)]
-            d_yaw, d_tilt, d_roll = (np.radians(_smooth_random(rng, t, a)) for a in (3.0, 3.0, 2.0))
-            zero = np.zeros_like(t)
-            local = np.stack([0.38 + sway[0], -0.12 + sway[1], 0.30 + sway[2]], -1)  # before the chest, right hand
-            pos = kin.pelvis_position_m(t) + np.einsum("nij,nj->ni", rotation_zyx(psi, zero, zero), local)
-            yaw = rotation_zyx(psi + np.radians(spec.hand_yaw_offset_deg) + d_yaw, zero, zero)
-            tilt = Rotation.from_rotvec(np.stack([np.radians(spec.hand_tilt_deg) + d_tilt, zero, d_roll], -1)).as_matrix()
-            return pos, yaw @ _PHONE_IN_BODY @ tilt
+            return self._handled(t) if spec.in_pocket_s else self._hand(t)
         if place == "pocket":
-            j, rot = kin.segment_pose(t, "thigh_left")
-            pos = j["hip_left"] + np.einsum("nij,j->ni", rot, np.array([0.07, 0.0, 0.3 * kin.body.thigh_m]))
-            return pos, rot @ _POCKET_IN_THIGH
+            return self._pocket(t)
         part, side = place.split("_")
         j, rot = kin.segment_pose(t, place)
         if part == "foot":

@@ -14,7 +14,9 @@ Scenario keys (TOML; every table but ``[[segment]]`` and ``[route]`` is optional
     no GNSS, magnetic disturbances near steel).
 ``[[imu]]`` one table per IMU; the first is ``imu.csv``, the others ``imu_<placement>.csv``: ``placement``
     (waist, pocket, hand, foot_left, foot_right, shank_left, shank_right), ``rate_hz`` and the error parameters
-    of :class:`pdr.sim.sensors.ImuSpec`. Default: one waist IMU at 100 Hz.
+    of :class:`pdr.sim.sensors.ImuSpec` (a phone in the hand: ``in_pocket_s``, ``handling_s``, the phone taken out
+    of and put back into the trouser pocket; the first IMU's handling goes to ``reference/handling.csv``).
+    Default: one waist IMU at 100 Hz.
 ``[gnss]`` the parameters of :class:`pdr.sim.gnss.GnssSpec` (``enabled``, ``noise_m``, ``markov_sigma_m``,
     ``markov_tau_s``, ``outlier_fraction``, ``outlier_m``, ``outages_s`` = [[start, end], ...], ...).
 ``[magnetic]`` ``field_ut``, ``inclination_deg``, ``declination_deg``, ``steel_ut`` (dipole strength, µT at 1 m),
@@ -49,7 +51,9 @@ from pdr.io.tomlio import read_toml
 from pdr.sim.gait import LEG_SCALE_SD, Body, GaitUser, WalkKinematics, plan_walk
 from pdr.sim.gnss import GnssSpec, simulate_gnss
 from pdr.sim.route import Route
-from pdr.sim.sensors import ImuSpec, MagneticField, place_steel, synthesize_imu, waist_sensor_above_hip_m
+from pdr.sim.sensors import (
+    ImuSpec, MagneticField, handling_intervals, place_steel, synthesize_imu, waist_sensor_above_hip_m,
+)
 
 SECTIONS = ("simulation", "subject", "geo", "route", "segment", "imu", "gnss", "magnetic", "barometer", "gait", "camera",
             "fault", "faults")
@@ -334,6 +338,8 @@ def simulate(scenario: dict[str, Any], seed: int, *, workdir: Path | None = None
         gnss = pd.DataFrame({"t_s": fixes["t_s"], "lat_deg": lat, "lon_deg": lon, "alt_m": origin[2] + fixes["u_m"],
                              "h_acc_m": fixes["h_acc_m"]})
     reference = _reference(kin, sc, gnss_truth)
+    if sc.imus[0].in_pocket_s:
+        reference["handling"] = handling_intervals(sc.imus[0], duration)
     if gnss_truth is not None:
         reference["gnss_truth"] = gnss_truth
     main = sc.imus[0].placement

@@ -278,7 +278,7 @@ class WeinbergStepLength(StepLengthModel):
 
     Attributes
     ----------
-    step_length_m_, step_length_std_m_ : per step.
+    step_length_m_, step_length_std_m_ : per step; n_fit_steps_ : steps used by the last :meth:`fit`.
 
     Notes
     -----
@@ -318,7 +318,7 @@ class KimStepLength(StepLengthModel):
 
     Attributes
     ----------
-    step_length_m_, step_length_std_m_ : per step.
+    step_length_m_, step_length_std_m_ : per step; n_fit_steps_ : steps used by the last :meth:`fit`.
 
     Notes
     -----
@@ -360,7 +360,7 @@ class ZijlstraStepLength(StepLengthModel):
 
     Attributes
     ----------
-    step_length_m_, step_length_std_m_ : per step.
+    step_length_m_, step_length_std_m_ : per step; n_fit_steps_ : steps used by the last :meth:`fit`.
 
     Notes
     -----

@@ -144,6 +144,13 @@ def bouts_from_mask(walking: np.ndarray, valid: np.ndarray, rate_hz: float, min_
     return merged
 
 
+def undecided_samples(rate_hz: float, window_s: float) -> int:
+    """Samples at each end of a recording that no window of :func:`walking_mask` decides for (each window decides
+    for its central hop; the first and the last vote for the recording's ends as well)."""
+    win = int(round(window_s * rate_hz))
+    return (win - max(1, win // 4)) // 2
+
+
 def core_walking(walking: np.ndarray, rate_hz: float, window_s: float) -> np.ndarray:
     """The walking samples every detector window covering them agrees on: each walking run shrunk by half a window.
 
@@ -153,9 +160,7 @@ def core_walking(walking: np.ndarray, rate_hz: float, window_s: float) -> np.nda
     the first window's central hop and after the last one's were never decided). A run shorter than a window has no core.
     """
     n = len(walking)
-    win = int(round(window_s * rate_hz))
-    hop = max(1, win // 4)
-    undecided = (win - hop) // 2  # as in walking_mask: each window decides for its central hop
+    undecided = undecided_samples(rate_hz, window_s)
     half = int(round(0.5 * window_s * rate_hz))
     core = np.zeros(n, bool)
     for a, b in runs(walking):

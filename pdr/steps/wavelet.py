@@ -11,8 +11,9 @@ import pywt
 from pdr.base import Algorithm
 from pdr.errors import InputError, warn
 from pdr.signals.attitude import gravity_direction_lowpass
-from pdr.signals.resample import UniformImu, moving_average, uniform_imu
-from pdr.steps.gait import bouts_from_mask, core_walking, rest_threshold_mps2, walking_mask
+from pdr.signals.resample import UniformImu, moving_average, runs, uniform_imu
+from pdr.steps.gait import bouts_from_mask, core_walking, rest_threshold_mps2, undecided_samples, walking_mask
+from pdr.steps.handling import HANDLING_COLUMNS, AttitudeHandlingDetection
 
 STEP_COLUMNS = ["t_s", "bout_id"]
 BOUT_COLUMNS = ["bout_id", "t_start_s", "t_end_s", "step_period_s", "n_steps"]
@@ -121,11 +122,18 @@ class WaveletStepDetection(Algorithm):
         lower back, chest, head), which sees every step. See :func:`pdr.steps.gait.step_period_from_acf`.
     track_cadence : resample each bout at a uniform gait phase (the kept octave follows a changing cadence)
         instead of at one rate per bout.
+    leave_out_handling : maxima inside the phone's handling (:class:`pdr.steps.handling.AttitudeHandlingDetection`:
+        taken out, put away, turned over) at an edge of a bout, with no gait-periodic window between it and the
+        bout's end, are not steps: there the acceleration is the hand's, not the gait's (:meth:`_leave_out_handling`).
+        Off by default (a strapped sensor is not handled); ``pdr steps`` and ``pdr run`` turn it on for a phone's
+        placements (:data:`pdr.pipelines.steps.PHONE_PLACEMENTS`).
 
     Attributes
     ----------
     steps_ : DataFrame ``t_s, bout_id`` (the instant of foot contact; bouts split where the stop rule fires).
     bouts_ : DataFrame ``bout_id, t_start_s, t_end_s, step_period_s, n_steps``.
+    handling_ : DataFrame ``t_start_s, t_end_s, turn_deg``: the handling intervals found (empty when not looked for).
+    left_out_ : DataFrame ``t_start_s, t_end_s, n_maxima``: the handling intervals whose maxima were left out.
     detail_ : the reconstructed detail band on the uniform grid (0 outside bouts), m/s².
     t_s_ : the uniform grid.
 
@@ -152,8 +160,9 @@ class WaveletStepDetection(Algorithm):
     def __init__(self, *, level: int = 4, min_step_freq_hz: float = 1.0, max_step_freq_hz: float = 3.5,
                  bout_window_s: float = 5.0, min_acc_std_mps2: float = 0.3, min_periodicity: float = 0.25,
                  min_bout_steps: int = 4, min_peak_ratio: float = 0.25, signal: str = "norm", bout_pad_s: float = 2.5,
-                 stride_check: bool = True, track_cadence: bool = True):
+                 stride_check: bool = True, track_cadence: bool = True, leave_out_handling: bool = False):
         self.level = level
+        self.leave_out_handling = leave_out_handling
         self.track_cadence = track_cadence
         self.stride_check = stride_check
         self.signal = signal
@@ -180,6 +189,9 @@ class WaveletStepDetection(Algorithm):
         self.t_s_ = u.t_s
         self.detail_ = np.zeros(len(u))
         self.steps_, self.bouts_ = empty_steps(), empty_bouts()
+        self.handling_ = pd.DataFrame({c: pd.Series(dtype=float) for c in HANDLING_COLUMNS})
+        self.left_out_ = pd.DataFrame({"t_start_s": pd.Series(dtype=float), "t_end_s": pd.Series(dtype=float),
+                                       "n_maxima": pd.Series(dtype=int)})
         min_step_s, max_step_s = 1.0 / self.max_step_freq_hz, 1.0 / self.min_step_freq_hz
         if u.rate_hz < 2.0 * self.max_step_freq_hz:
             warn(f"steps: sampling rate {u.rate_hz:.1f} Hz is below twice the highest cadence "
@@ -192,8 +204,14 @@ class WaveletStepDetection(Algorithm):
         bouts = bouts_from_mask(walking, u.valid, u.rate_hz, min_bout_s=self.min_bout_steps * min_step_s,
                                 pad_s=self.bout_pad_s)
         core = core_walking(walking, u.rate_hz, self.bout_window_s)
+        handled = AttitudeHandlingDetection().detect(u) if self.leave_out_handling else None
+        if handled is not None:
+            self.handling_ = handled.intervals_
+            decided = walking.copy()  # walking where a window decided it: not the recording's ends
+            edge = undecided_samples(u.rate_hz, self.bout_window_s)
+            decided[:edge] = decided[len(decided) - edge:] = False
         sums = (np.concatenate([[0.0], np.cumsum(x)]), np.concatenate([[0.0], np.cumsum(x * x)]))
-        times, bout_ids, rows = [], [], []
+        times, bout_ids, rows, left_out = [], [], [], []
         bout_id = 0
         for a, b in bouts:
             p = period[a:b]
@@ -204,6 +222,9 @@ class WaveletStepDetection(Algorithm):
             local = period[a:b] if self.track_cadence else np.full(b - a, step_s)
             local = moving_average(np.where(np.isfinite(local), local, step_s), int(round(self.bout_window_s * u.rate_hz)))
             t_peaks = self._bout_steps(u, x, a, b, local, core[a:b], sums)
+            if handled is not None:
+                t_peaks, dropped = self._leave_out_handling(u, handled.handling_, decided, a, b, t_peaks)
+                left_out += dropped
             for seg in self._split_stops(t_peaks, step_s, max_step_s):
                 if len(seg) < self.min_bout_steps:
                     continue
@@ -211,6 +232,8 @@ class WaveletStepDetection(Algorithm):
                 bout_ids.append(np.full(len(seg), bout_id))
                 rows.append((bout_id, float(seg[0]), float(seg[-1]), step_s, len(seg)))
                 bout_id += 1
+        if left_out:
+            self.left_out_ = pd.DataFrame(left_out, columns=list(self.left_out_.columns))
         if times:
             self.steps_ = pd.DataFrame({"t_s": np.concatenate(times), "bout_id": np.concatenate(bout_ids).astype(int)})
             self.bouts_ = pd.DataFrame(rows, columns=BOUT_COLUMNS)
@@ -283,6 +306,25 @@ class WaveletStepDetection(Algorithm):
         var = (c2[i1] - c2[i0]) / cnt - ((c1[i1] - c1[i0]) / cnt) ** 2
         gate = np.where(in_core, rest_threshold_mps2(self.min_acc_std_mps2, step_s), self.min_acc_std_mps2)
         return tb[var >= gate ** 2]
+
+    @staticmethod
+    def _leave_out_handling(u: UniformImu, handling: np.ndarray, walking: np.ndarray, a: int, b: int,
+                            t: np.ndarray) -> tuple[np.ndarray, list[tuple[float, float, int]]]:
+        """``t`` without the maxima inside the handling intervals at an edge of the bout ``[a, b)``: no walking
+        (``walking``: windows found gait-periodic) between the interval and the bout's start, or between it and the
+        bout's end. There the walker starts or stops, and the acceleration is the hand's. Handling with walking on
+        both sides (the phone taken out while walking on) keeps its steps. Also returns the intervals that lost
+        maxima: ``(t_start_s, t_end_s, n_maxima)``."""
+        k = np.clip(np.round((t - u.t_s[0]) * u.rate_hz).astype(int), 0, len(u) - 1)
+        keep = np.ones(len(t), bool)
+        dropped = []
+        for lo, hi in runs(handling[a:b]):
+            lo, hi = a + lo, a + hi
+            inside = (k >= lo) & (k < hi)
+            if inside.any() and not (walking[a:lo].any() and walking[hi:b].any()):
+                keep &= ~inside
+                dropped.append((float(u.t_s[lo]), float(u.t_s[hi - 1]), int(inside.sum())))
+        return t[keep], dropped
 
     @staticmethod
     def _split_stops(t: np.ndarray, step_s: float, max_step_s: float) -> list[np.ndarray]:

@@ -1,9 +1,11 @@
 """Shared by the smartphone-app importers (Sensor Logger, phyphox): one IMU table from sensors on separate clocks,
-the GNSS table with its geo origin, and the checks that name the user's file (gravity present, GNSS on the same
-clock)."""
+the GNSS table with its geo origin, and the checks that name the user's file (the app that wrote it, gravity
+present, GNSS on the same clock)."""
 
 from __future__ import annotations
 
+import re
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -18,6 +20,39 @@ Series = tuple[np.ndarray, np.ndarray]  # (t_s increasing, values (N, k))
 MIN_OVERLAP_S = 0.5
 MIN_STEADY_FRACTION = 0.7  # gravity dominates a 1 s mean (walking moves the phone's tilt by tens of degrees at most)
 MAX_GNSS_OUTSIDE_S = 60.0  # a first fix may come a while after the start tap; hours away is another clock
+APPS = {"sensorlogger": "Sensor Logger", "phyphox": "phyphox"}
+
+
+def csv_app(path: Path) -> str | None:
+    """The app whose header a CSV file carries: ``sensorlogger`` (a ``seconds_elapsed`` column; ``Metadata.csv``'s
+    ``version, device name, ...``), ``phyphox`` (a first column ``Time (s)``, or ``"time"`` quoted as phyphox quotes
+    its headers, in custom experiments), else None."""
+    try:
+        with open(path, encoding="utf-8-sig", errors="replace") as f:
+            line = f.readline(4096)
+    except OSError:
+        return None
+    raw = [c.strip().lower() for c in re.split(r"[,;\t]", line)]
+    cells = [c.strip('"').strip() for c in raw]
+    if "seconds_elapsed" in cells or cells[:2] == ["version", "device name"]:
+        return "sensorlogger"
+    if cells[0] == "time (s)" or raw[0] == '"time"':
+        return "phyphox"
+    return None
+
+
+def require_app(folder: Path, app: str, what: str) -> None:
+    """Refuse an export folder whose CSV files another app wrote, or that mixes both apps' files (two exports)."""
+    by_app = {a: sorted(p.name for p in folder.glob("*.csv") if p.is_file() and csv_app(p) == a) for a in APPS}
+    other = next(a for a in APPS if a != app)
+    if not by_app[other]:
+        return
+    theirs = ", ".join(by_app[other][:3])
+    if by_app[app]:
+        raise InputError(f"{what}: expected one export per folder, found {APPS[app]} files ({', '.join(by_app[app][:3])}) "
+                         f"mixed with {APPS[other]} files ({theirs})")
+    raise InputError(f"{what}: expected a {APPS[app]} export, found a {APPS[other]} export ({theirs}): import it with "
+                     f"pdr import {other}")
 
 
 def clean_series(t: np.ndarray, values: np.ndarray, what: str) -> Series:

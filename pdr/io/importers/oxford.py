@@ -9,8 +9,9 @@ Sources (see ``datasets/oxford_step_counter/README.md``):
 - a folder holding several of either (all are imported).
 
 Output: ``imu.csv`` (t_s relative to the first sample), ``reference/steps.csv`` (``t_s`` of each ground-truth step:
-where ``steps_ground_truth`` goes up, or each 0 -> 1 transition of either foot channel, as upstream ``stats.js``),
-``reference/summary.toml`` (``n_steps``; ``n_steps_app`` = the app's own algorithm count of validation files).
+where ``steps_ground_truth`` goes up, or the 0 -> 1 transitions of the two foot channels with the feet made to
+alternate, :func:`foot_device_steps`), ``reference/summary.toml`` (``n_steps``; ``n_steps_app`` = the app's own
+algorithm count of validation files; ``n_steps_device`` = every 0 -> 1 transition of either channel, upstream ``stats.js``).
 A leading all-zero row is dropped with a warning, and so are repeated time stamps.
 """
 
@@ -30,6 +31,10 @@ from pdr.io.recording import Recording
 
 NS_PER_S = 1e9
 MAX_STEPS_PER_SAMPLE = 3  # a walker makes < 5 steps/s; the files sample at ~100 Hz (the count rises by 0 or 1)
+# Walking and running alternate the feet at 1 to 3.5 steps/s (the cadence range of the step detectors), so two
+# successive contacts of one foot are a stride apart: 2 / 3.5 = 0.57 s to 2 / 1 = 2 s.
+MIN_STRIDE_S = 2.0 / 3.5
+MAX_STRIDE_S = 2.0 / 1.0
 PLACEMENT_BY_POSITION = {
     "hand": "hand", "inhand": "hand",
     "frontpocket": "pocket", "backpocket": "pocket",
@@ -57,6 +62,33 @@ def _drop_leading_zero_rows(t: np.ndarray, acc: np.ndarray, what: str) -> int:
     if first:
         warn(f"{what}: dropped {first} leading all-zero row(s) (logger start-up)")
     return first
+
+
+def foot_device_steps(rises_s: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, int, int]:
+    """Step instants (s, sorted) from the 0 -> 1 transitions of the two foot channels, the feet made to alternate.
+
+    A contact of a foot with no contact of the other foot since its previous one is, sooner than the shortest stride
+    (``MIN_STRIDE_S``), that contact bouncing: dropped; within the longest stride (``MAX_STRIDE_S``), a stride over
+    which the device (about 10 Hz) missed the other foot's contact: one is added midway; later, the walker stood in
+    between: kept as it is. Returns ``(steps, n_dropped, n_added)``.
+    """
+    t = np.concatenate(rises_s)
+    foot = np.concatenate([np.full(len(r), k) for k, r in enumerate(rises_s)])
+    order = np.argsort(t, kind="stable")
+    steps: list[float] = []
+    last_foot, dropped, added = -1, 0, 0
+    for ti, fi in zip(t[order], foot[order]):
+        if fi == last_foot:
+            gap = ti - steps[-1]
+            if gap < MIN_STRIDE_S:
+                dropped += 1
+                continue
+            if gap <= MAX_STRIDE_S:
+                steps.append(steps[-1] + 0.5 * gap)
+                added += 1
+        steps.append(float(ti))
+        last_foot = fi
+    return np.asarray(steps, float), dropped, added
 
 
 def _validation_file(path: Path) -> Recording:
@@ -119,15 +151,19 @@ def _optimisation_folder(folder: Path) -> Recording:
     t0 = t_ns[keep][0]
     t_s, acc = (t_ns[keep] - t0) / NS_PER_S, acc[keep]
     t_s, acc = steady_clock(t_s, acc, f"{what}/accelerometer.csv")
-    # A step is each 0 -> 1 transition of either foot channel (upstream stats.js).
-    rises = [s[1:, 0][(s[1:, c] == 1) & (s[:-1, c] == 0)] for c in (1, 2)]
-    step_ns = np.sort(np.concatenate(rises))
+    rises = tuple((s[1:, 0][(s[1:, c] == 1) & (s[:-1, c] == 0)] - t0) / NS_PER_S for c in (1, 2))
+    step_s, dropped, added = foot_device_steps(rises)
+    if dropped or added:
+        warn(f"{what}/stepcounter.csv: the feet made to alternate in the reference steps: {dropped} bouncing "
+             f"contact(s) dropped, {added} missed contact(s) of the other foot added")
     parts = folder.name.split("_")
     position = parts[3] if len(parts) >= 5 else folder.name
     meta = {"recording": {"id": safe_id(folder.name), "placement": _placement(position, what), "source": "oxford"}}
     reference = {
-        "steps": pd.DataFrame({"t_s": (step_ns - t0) / NS_PER_S}),
-        "summary": {"n_steps": int(len(step_ns)), "steps_source": "foot ground-truth device (0 -> 1 transitions of either foot)"},
+        "steps": pd.DataFrame({"t_s": step_s}),
+        "summary": {"n_steps": int(len(step_s)), "n_steps_device": int(sum(len(r) for r in rises)),
+                    "steps_source": "foot ground-truth device (0 -> 1 transitions of the two feet, made to alternate)",
+                    "n_steps_device_source": "every 0 -> 1 transition of either foot (upstream stats.js)"},
     }
     return Recording(meta=meta, imu=imu_frame(t_s, acc), reference=reference)
 

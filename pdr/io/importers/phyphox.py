@@ -37,7 +37,9 @@ import pandas as pd
 
 from pdr.errors import InputError, warn
 from pdr.io.importers._common import numeric_array, read_table, safe_id, source_folder, write_recordings
-from pdr.io.importers._phone import Series, clean_series, combine_imu, gnss_table, require_gravity, require_overlap
+from pdr.io.importers._phone import (
+    Series, clean_series, combine_imu, gnss_table, require_app, require_gravity, require_overlap,
+)
 from pdr.io.recording import Recording
 
 _COLUMN = re.compile(r"^(?P<label>.*?)\s*\((?P<unit>[^()]*)\)\s*$")
@@ -152,24 +154,33 @@ def import_source(src: Path, dest: Path, *, rate_hz: float | None = None, force:
     what = src.name
     with source_folder(src, f"phyphox {what}") as folder:
         if not any(folder.glob("*.csv")):  # a zip with one enclosing folder
-            subs = [p for p in folder.iterdir() if p.is_dir() and p.name not in ("meta", "__MACOSX")]
+            subs = sorted(p for p in folder.iterdir() if p.is_dir() and p.name not in ("meta", "__MACOSX"))
+            exports = [p.name for p in subs if any(p.glob("*.csv"))]
+            if len(exports) > 1:
+                raise InputError(f"{what}: expected one phyphox export, found {len(exports)} ({', '.join(exports[:4])}): "
+                                 "import each on its own")
             folder = subs[0] if len(subs) == 1 else folder
         files = sorted(p for p in folder.glob("*.csv") if p.is_file())
         if not files:
             raise InputError(f"{what}: expected a phyphox CSV export (files with a \"Time (s)\" column), found no .csv file")
+        require_app(folder, "phyphox", what)
         found: dict[str, tuple[np.ndarray, dict[str, int], pd.DataFrame, str]] = {}
         for path in files:
             if path.stat().st_size == 0:
                 warn(f"{path.name}: empty file; taken as absent")
                 continue
             df = _read(path, path.name)
-            for time_col, sensors in _classify(df, path.name):
+            groups = _classify(df, path.name)
+            if not groups:
+                raise InputError(f"{path.name}: expected phyphox columns, \"Time (s)\" (or \"time\") then quantities such "
+                                 f"as \"Acceleration x (m/s^2)\", found {', '.join(map(str, df.columns))}")
+            for time_col, sensors in groups:
                 for kind, cols in sensors.items():
                     found.setdefault(kind, (time_col, cols, df, path.name))
         if "acc" not in found:
             hint = " (only linear acceleration, which has gravity removed: record 'Acceleration with g')" if "linacc" in found else ""
             raise InputError(f"{what}: expected a phyphox export with acceleration including gravity, columns "
-                             f"\"Acceleration x (m/s^2)\" or \"X (m/s^2)\", found none{hint}")
+                             f"\"Acceleration x (m/s^2)\" or \"X (m/s^2)\", found none in {', '.join(p.name for p in files[:6])}{hint}")
         raw: dict[str, tuple[np.ndarray, np.ndarray, str]] = {}
         for kind, axes in (("acc", ("x", "y", "z")), ("gyr", ("x", "y", "z")), ("mag", ("x", "y", "z")), ("baro", ("p",))):
             if kind in found:

@@ -40,7 +40,9 @@ from pdr.errors import InputError, warn
 from pdr.io.importers._common import (
     find_export_root, interp_columns, numeric_array, read_table, safe_id, source_folder, write_recordings,
 )
-from pdr.io.importers._phone import Series, clean_series, combine_imu, gnss_table, require_gravity, require_overlap
+from pdr.io.importers._phone import (
+    Series, clean_series, combine_imu, gnss_table, require_app, require_gravity, require_overlap,
+)
 from pdr.io.recording import Recording
 
 NS_PER_S = 1e9
@@ -155,6 +157,7 @@ def import_source(src: Path, dest: Path, *, rate_hz: float | None = None, force:
     what = src.name
     with source_folder(src, f"sensorlogger {what}") as folder:
         folder = find_export_root(folder, SENSOR_FILES)
+        require_app(folder, "sensorlogger", what)
         meta_csv = _metadata(folder)
         acc_raw, f, acc_name = _specific_force(folder, what, meta_csv)
         t0 = acc_raw[0][0]
