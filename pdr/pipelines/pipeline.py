@@ -176,8 +176,8 @@ class Pipeline(Algorithm):
     gnss : the ``[gnss]`` section (``mask_intervals_s``).
     use_gnss : False: the recording's GNSS is not used (``pdr run --no-gnss``).
 
-    Results
-    -------
+    Attributes
+    ----------
     trajectory_ : ``t_s, e_m, n_m, heading_rad, e_std_m, n_std_m`` (the start, then one row per step or stride).
     steps_ : the steps table (``step_id, t_s, ..., step_length_m`` fused, ``heading_rad`` fused, ``source``).
     strides_ : the strides of the foot IMUs and the leg camera, None without a stride source.
@@ -237,6 +237,11 @@ class Pipeline(Algorithm):
                    leg_camera={"flow": dict(config.get("flow", {})), "slip_of": dict(config.get("slip_of", {}))},
                    faults=SensorFaultDetection.from_config(config.get("faults")), fusion=fusion, gnss=settings,
                    use_gnss=use_gnss)
+
+    @classmethod
+    def from_json(cls, params: dict[str, Any]) -> "Pipeline":
+        """The pipeline of :meth:`params_to_json` data (its parameters are JSON data already)."""
+        return cls().set_params(**params)
 
     def get_params(self) -> dict[str, Any]:
         """The parameters as JSON data: every stage as its configuration section (see the class docstring)."""
