@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pdr.heading.step_heading import wrap
+from pdr.schema import wrap_rad
 from pdr.io.recording import load_recording
 from pdr.pipelines.steps import detect_steps
 from pdr.sim import simulate_to_disk
@@ -36,7 +36,7 @@ def heading_errors(rec) -> tuple[np.ndarray, np.ndarray]:
     running = ref_steps["speed_mps"].to_numpy(float)[j] > RUN_SPEED_MPS
     diff = table["heading_rad"].to_numpy(float) - truth
     frame = np.angle(np.mean(np.exp(1j * diff[~running])))
-    return np.abs(wrap(diff - frame)), running
+    return np.abs(wrap_rad(diff - frame)), running
 
 
 def run(quick: bool = False) -> list[dict]:

@@ -23,6 +23,7 @@ from pdr.foot._rotations import align_to_gravity, cumulative_rotations, rotvec_t
 from pdr.foot.frame import estimate_foot_frame
 from pdr.io.recording import Recording
 from pdr.pipelines.foot import foot_strides
+from pdr.schema import STRIDE_COLUMNS
 
 sys.path.insert(0, str(Path(__file__).parent))
 from foot_sim import simulate_foot_walk  # noqa: E402
@@ -30,7 +31,6 @@ from foot_sim import simulate_foot_walk  # noqa: E402
 from conftest import real_dataset, warns
 
 ROOT = Path(__file__).resolve().parents[1]
-STRIDE_COLUMNS = ["t_start_s", "t_end_s", "foot", "length_m", "length_std_m", "source"]
 
 
 @pytest.fixture(scope="module")
@@ -114,7 +114,7 @@ def test_a_foot_that_never_rests_warns_and_gives_no_stance():
     rec = Recording(meta={"recording": {"id": "run", "placement": "foot_right"}}, imu=imu)
     with warns():
         out = foot_strides(rec, {})
-    assert len(out) == 0 and list(out.columns)[:6] == STRIDE_COLUMNS
+    assert len(out) == 0 and list(out.columns)[:6] == list(STRIDE_COLUMNS)
 
 
 @pytest.mark.parametrize("bad, match", [
@@ -134,7 +134,7 @@ def test_too_short_input_warns_and_is_empty(walk):
     assert len(det.stances_) == 0
     with warns():
         fst = FootStepTrackerStride().estimate(walk[0].iloc[:10])
-    assert len(fst.strides_) == 0 and list(fst.strides_.columns)[:6] == STRIDE_COLUMNS
+    assert len(fst.strides_) == 0 and list(fst.strides_.columns)[:6] == list(STRIDE_COLUMNS)
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -157,7 +157,7 @@ def test_footstep_tracker_stride_length_and_critical_times(walk):
     imu, truth = walk
     fst = FootStepTrackerStride(foot="right").estimate(imu)
     s = fst.strides_
-    assert list(s.columns)[:6] == STRIDE_COLUMNS and (s["foot"] == "right").all() and (s["source"] == "foot_imu").all()
+    assert list(s.columns)[:6] == list(STRIDE_COLUMNS) and (s["foot"] == "right").all() and (s["source"] == "foot_imu").all()
     assert len(s) == len(truth)
     assert np.abs(s["length_m"].to_numpy() - truth["length_m"].to_numpy()).max() < 0.06  # pitch-only model
     full = FootStepTrackerStride(attitude="full").estimate(imu).strides_
@@ -319,7 +319,7 @@ def test_double_feet_gate_keeps_a_stride_the_other_foot_contradicts():
 def test_foot_strides_of_two_feet():
     rec = _two_feet()
     out = foot_strides(rec, {"foot": {"method": "zupt_ins", "double_feet": True}})
-    assert list(out.columns)[:6] == STRIDE_COLUMNS
+    assert list(out.columns)[:6] == list(STRIDE_COLUMNS)
     assert set(out["foot"]) == {"left", "right"} and (out["source"] == "foot_imu").all()
     assert out["t_start_s"].is_monotonic_increasing
     walking = out[(out["t_end_s"] - out["t_start_s"]) < 1.5]

@@ -8,7 +8,7 @@ import pytest
 
 from pdr.constants import GRAVITY_MPS2
 from pdr.heading import gait_phase_sign, walking_direction
-from pdr.heading.step_heading import wrap
+from pdr.schema import wrap_rad
 from pdr.io.recording import Recording
 from pdr.pipelines.steps import detect_steps
 from pdr.signals import estimate_attitude, uniform_imu, yaw_increments
@@ -82,7 +82,7 @@ def test_walking_direction_resolves_180_degrees(direction):
     fwd, vert, lat = np.sin(w * t), -np.cos(w * t), 0.7 * np.sin(0.5 * w * t)  # forward leads vertical by 90 degrees
     a = np.column_stack([fwd * np.cos(direction) - lat * np.sin(direction), fwd * np.sin(direction) + lat * np.cos(direction), vert])
     d, quality = walking_direction(a, rate, 1 / f)
-    assert wrap(d - direction) == pytest.approx(0.0, abs=0.05)
+    assert wrap_rad(d - direction) == pytest.approx(0.0, abs=0.05)
     assert quality > 0.5
 
 
@@ -93,7 +93,7 @@ def test_heading_follows_turn_whatever_device_offset(offset):
     assert len(table) > 60
     before = table[table.t_s < 16]
     after = table[table.t_s > 24]
-    turned = wrap(np.angle(np.mean(np.exp(1j * after.heading_rad))) - np.angle(np.mean(np.exp(1j * before.heading_rad))))
+    turned = wrap_rad(np.angle(np.mean(np.exp(1j * after.heading_rad))) - np.angle(np.mean(np.exp(1j * before.heading_rad))))
     assert turned == pytest.approx(np.pi / 2, abs=0.1)
     assert table.heading_change_rad.sum() == pytest.approx(np.pi / 2, abs=0.15)
     assert (table.heading_change_std_rad > 0).all() and table.mag_heading_rad.isna().all()
@@ -106,7 +106,7 @@ def test_mag_heading_absolute(offset):
     table = detect_steps(Recording(meta={"recording": {"id": "mag", "placement": "hand"}}, imu=imu), {})
     ok = table.mag_heading_rad.dropna()
     assert len(ok) > 0.8 * len(table)
-    assert wrap(np.angle(np.mean(np.exp(1j * ok))) - 0.4) == pytest.approx(0.0, abs=0.1)
+    assert wrap_rad(np.angle(np.mean(np.exp(1j * ok))) - 0.4) == pytest.approx(0.0, abs=0.1)
 
 
 def test_no_gyro_heading_change_zero_with_large_std():
@@ -139,7 +139,7 @@ def test_walking_direction_of_a_run_with_a_flight_phase(direction):
     a = running_stretch(direction, rate=rate, step_hz=step_hz)
     assert (gait_phase_sign(a[:, 2], rate, 1 / step_hz) == -1.0).all()
     d, quality = walking_direction(a, rate, 1 / step_hz)
-    assert wrap(d - direction) == pytest.approx(0.0, abs=0.1)
+    assert wrap_rad(d - direction) == pytest.approx(0.0, abs=0.1)
     assert quality > 0.3
 
 
@@ -172,6 +172,6 @@ def test_run_inside_a_walk_keeps_the_heading():
     running = speed > 2.2
     assert running.sum() > 40 and (~running).sum() > 40
     diff = table.heading_rad.to_numpy() - truth
-    err = np.abs(wrap(diff - np.angle(np.mean(np.exp(1j * diff[~running])))))  # the 6D frame's yaw zero is arbitrary
+    err = np.abs(wrap_rad(diff - np.angle(np.mean(np.exp(1j * diff[~running])))))  # the 6D frame's yaw zero is arbitrary
     assert np.degrees(err.max()) < 30.0
     assert np.degrees(np.median(err[running])) < 6.0

@@ -11,7 +11,8 @@ from scipy.spatial.transform import Rotation
 from pdr.cli.main import main
 from pdr.constants import GRAVITY_MPS2
 from pdr.errors import InputError, collect_warnings
-from pdr.gait.mechanics import BOUT_COLUMNS, sensor_above_hip_m, step_energies, walking_bouts
+from pdr.gait.mechanics import sensor_above_hip_m, step_energies, walking_bouts
+from pdr.schema import BOUT_COLUMNS
 from pdr.io.recording import save_recording
 from pdr.signals import uniform_imu
 from pdr.sim import simulate

@@ -126,3 +126,58 @@ def test_swing_clearance_follows_the_measured_stride():
     assert np.all(est.fits_.length_m.to_numpy() != old.fits_.length_m.to_numpy())
     with pytest.raises(InputError, match="clearance_from"):
         SlipOpticalFlowStride(clearance_from="thigh").estimate(t, f)
+
+
+def test_body_from_what_a_user_knows():
+    body = SlipBody.from_user(1.80)  # Winter's ratios: hip 0.530 H, knee 0.285 H, foot 0.152 H
+    assert body.leg_length_m == pytest.approx(0.530 * 1.80)
+    assert body.shank_length_m == pytest.approx(0.285 * 1.80) and body.foot_length_m == pytest.approx(0.152 * 1.80)
+    long_legs = SlipBody.from_user(1.80, leg_length_m=1.0)  # a measured leg rescales thigh and knee height alike
+    assert long_legs.leg_length_m == pytest.approx(1.0)
+    assert long_legs.shank_length_m / long_legs.thigh_length_m == pytest.approx(body.shank_length_m / body.thigh_length_m)
+    shank = SlipBody.from_user(1.80, leg_length_m=0.95, shank_length_m=0.42)  # knee to ankle + the ankle height
+    assert shank.shank_length_m == pytest.approx(0.42 + 0.039 * 1.80) and shank.leg_length_m == pytest.approx(0.95)
+    with pytest.raises(InputError, match="height_m"):
+        SlipBody.from_user(-1.7)
+    with pytest.raises(InputError, match="knee between hip and floor"):
+        SlipBody.from_user(1.80, leg_length_m=0.5, shank_length_m=0.45)
+
+
+def test_a_fit_that_cannot_explain_the_flow_is_flagged():
+    est = SlipOpticalFlowStride(camera_from_knee_m=0.3, focal_px=140.0, strides_per_fit=1)
+    t, f, length, dur = _measured(est, (1.3, -0.2, math.radians(15), 12000.0))
+    good = est.estimate(t, f)
+    assert (good.fits_.flag == "").all() and len(good.strides_) == 3  # the model's own flow: no failure
+    assert (good.fits_.spread_m >= 0).all()
+    # the same stride timing, but the swing burst replaced by flow of random sign: no SLIP stride explains it
+    rng = np.random.default_rng(1)
+    swing = np.mod(t - 0.2, dur) > 0.6 * dur
+    bad = np.where(swing, rng.normal(0.0, np.std(f), len(t)) + 0.5 * f, f)
+    with warns(match="fits failed"):
+        flagged = SlipOpticalFlowStride(**est.get_params()).estimate(t, bad, segments=good.segments_)
+    assert (flagged.fits_.flag != "").all() and flagged.strides_.empty
+
+
+def test_impossible_mount_and_too_slow_video_give_no_stride():
+    est = SlipOpticalFlowStride(camera_from_knee_m=0.3, focal_px=140.0, strides_per_fit=1)
+    t, f, _, dur = _measured(est, (1.3, -0.2, math.radians(15), 12000.0))
+    segs = est.estimate(t, f).segments_
+    with warns(match="under the floor"):
+        assert SlipOpticalFlowStride(camera_from_knee_m=0.7, focal_px=140.0).estimate(t, f).strides_.empty
+    slow = slice(None, None, int(round(0.5 * dur / 0.01)))  # two samples per stride: one per step
+    with warns(match="twice the cadence"):
+        assert SlipOpticalFlowStride(**est.get_params()).estimate(t[slow], f[slow], segments=segs).strides_.empty
+
+
+def test_a_runaway_swing_clearance_keeps_the_slip_clearance_with_a_wide_sigma():
+    est = SlipOpticalFlowStride(camera_from_knee_m=0.3, focal_px=140.0, strides_per_fit=1, scale_windows=1)
+    t, f, _, _ = _measured(est, (1.3, -0.2, math.radians(15), 12000.0))
+    assert est.estimate(t, f).fits_.clearance_converged.all()
+    # a clearance law this steep makes the scale grow faster than the stride: the passes run away
+    steep = {**est.get_params(), "swing_clearance_ratio": 0.15}
+    runaway = SlipOpticalFlowStride(**steep).estimate(t, f)
+    own = SlipOpticalFlowStride(**{**steep, "clearance_iterations": 0}).estimate(t, f)
+    fits = runaway.fits_
+    assert not fits.clearance_converged.any()
+    np.testing.assert_allclose(fits.length_m, own.fits_.length_m, rtol=1e-9)  # the SLIP's own clearance
+    assert np.all(fits.length_std_m > own.fits_.length_std_m) and np.all(fits.length_std_m >= 0.5 * fits.spread_m)

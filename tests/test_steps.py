@@ -19,7 +19,7 @@ from pdr.pipelines.steps import STEPS_COLUMNS, detect_steps, make_detector
 from pdr.sim import simulate
 from pdr.steps import PeakStepDetection, WaveletStepDetection
 from pdr.steps.features import fft_frequency, spacing_frequency, step_durations, step_variance
-from pdr.steps.gait import rest_threshold_mps2, step_period_from_acf, window_acf
+from pdr.steps.gait import resolve_octaves, rest_threshold_mps2, step_period_from_acf, window_acf
 from pdr.steps.wavelet import neighbour_reference
 
 
@@ -87,6 +87,20 @@ def test_step_period_from_acf_step_and_stride_periodic():
         p, strength = step_period_from_acf(acf[0], rate, 1 / 3.5, 1.0)
         assert p == pytest.approx(1 / 1.8, rel=0.05)
         assert strength > 0.5
+
+
+def test_resolve_octaves_halves_a_stride_next_to_steps_only():
+    """A pocket phone's window that found the stride (0.98 s, no trough at half of it) between windows that found the
+    step (0.49 s) is halved, and so is the run it leads; a window in anti-phase at half its period keeps it; a
+    ratio far from 2 (a handling window's spurious 0.38 s next to 0.64 s steps) changes nothing."""
+    walking = np.ones(5, bool)
+    p = resolve_octaves(np.array([0.49, 0.98, 0.97, 0.99, 0.50]), walking, np.array([-0.9, -0.1, -0.1, -0.1, -0.9]))
+    np.testing.assert_allclose(p, [0.49, 0.49, 0.485, 0.495, 0.50])
+    kept = np.array([0.49, 0.98, 0.50])
+    np.testing.assert_allclose(resolve_octaves(kept, np.ones(3, bool), np.array([-0.9, -0.8, -0.9])), kept)
+    np.testing.assert_allclose(resolve_octaves(kept, np.array([True, True, False]), np.array([-0.9, -0.1, 0.0]))[2], 0.50)
+    edge = np.array([0.60, 0.62, 0.64, 0.38])
+    np.testing.assert_allclose(resolve_octaves(edge, np.ones(4, bool), np.array([-0.6, -0.48, -0.28, -0.3])), edge)
 
 
 # --- wavelet detector ------------------------------------------------------------------------------------------

@@ -13,15 +13,15 @@ from pdr.foot._checks import foot_imu_arrays
 from pdr.foot._rotations import align_to_gravity, cumulative_rotations
 from pdr.foot.frame import estimate_foot_frame
 from pdr.foot.zero_velocity import ZeroVelocityDetection
+from pdr.schema import STRIDE_COLUMNS
 
 CRITICAL_COLUMNS = ["t_uplift_s", "t_liftoff_s", "t_landing_s", "t_rest_s",
                     "i_uplift", "i_liftoff", "i_landing", "i_rest"]
-STRIDE_COLUMNS = ["t_start_s", "t_end_s", "foot", "length_m", "length_std_m", "source", "forward_m", "lateral_m",
-                  "height_change_m", "toe_angle_rad", "max_pitch_rad", "t_liftoff_s", "t_landing_s", "t_swing_start_s",
-                  "t_swing_end_s"]
+FST_STRIDE_COLUMNS = [*STRIDE_COLUMNS, "forward_m", "lateral_m", "height_change_m", "toe_angle_rad", "max_pitch_rad",
+                      "t_liftoff_s", "t_landing_s", "t_swing_start_s", "t_swing_end_s"]
 
 
-def empty_strides(columns: list[str] = STRIDE_COLUMNS) -> pd.DataFrame:
+def empty_strides(columns: list[str] = FST_STRIDE_COLUMNS) -> pd.DataFrame:
     """A correctly typed strides table without rows."""
     kinds = {"foot": str, "source": str}
     return pd.DataFrame({c: pd.Series(dtype=object if c in kinds else float) for c in columns})
@@ -164,7 +164,7 @@ class FootStepTrackerStride(Algorithm):
             rows.append((t[lo], t[hi], self.foot, float(length), std, "foot_imu", float(d[0]), float(d[1]),
                          float(d[2]), phi, float(np.max(np.abs(theta))), t[il], t[idn], t[iu + j], t[ir]))
         self.critical_times_ = pd.DataFrame(crit, columns=CRITICAL_COLUMNS)
-        self.strides_ = pd.DataFrame(rows, columns=STRIDE_COLUMNS)
+        self.strides_ = pd.DataFrame(rows, columns=FST_STRIDE_COLUMNS)
         self.toe_angle_rad_ = float(np.median(self.strides_["toe_angle_rad"]))
         return self
 

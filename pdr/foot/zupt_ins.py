@@ -19,7 +19,7 @@ from pdr.foot.zero_velocity import ZeroVelocityDetection
 INS_STRIDE_COLUMNS = ["t_start_s", "t_end_s", "foot", "length_m", "length_std_m", "lateral_std_m", "source", "dx_m",
                       "dy_m", "dz_m", "heading_rad", "heading_change_rad", "heading_change_std_rad", "t_swing_start_s",
                       "t_swing_end_s"]
-TRAJECTORY_COLUMNS = ["t_s", "x_m", "y_m", "z_m", "vx_mps", "vy_mps", "vz_mps"]
+INS_TRAJECTORY_COLUMNS = ["t_s", "x_m", "y_m", "z_m", "vx_mps", "vy_mps", "vz_mps"]
 
 
 def _skew(v: np.ndarray) -> np.ndarray:
@@ -160,7 +160,7 @@ class ZuptInsStride(Algorithm):
         t, acc, gyr = foot_imu_arrays(imu, f"{self.foot} foot IMU")
         self.stance_ = stance if stance is not None else ZeroVelocityDetection(**(self.zero_velocity or {})).detect(imu)
         st = self.stance_.stances_
-        self.trajectory_ = pd.DataFrame({c: pd.Series(dtype=float) for c in TRAJECTORY_COLUMNS})
+        self.trajectory_ = pd.DataFrame({c: pd.Series(dtype=float) for c in INS_TRAJECTORY_COLUMNS})
         self.strides_ = empty_strides(INS_STRIDE_COLUMNS)
         self.position_cov_m2_ = np.zeros((0, 3, 3))
         self.final_position_m_ = np.full(3, np.nan)

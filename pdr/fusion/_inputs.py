@@ -7,23 +7,16 @@ measurements and the same GNSS association, and bad input gives the same one-lin
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 import pandas as pd
 
 from pdr.errors import InputError, warn
+from pdr.schema import GNSS_LOCAL_COLUMNS, TRAJECTORY_COLUMNS, require_table, wrap_rad
 
-TRAJECTORY_COLUMNS = ["t_s", "e_m", "n_m", "heading_rad", "e_std_m", "n_std_m"]
-STEP_COLUMNS = ["t_s", "step_length_m", "step_length_std_m"]
-GNSS_COLUMNS = ["t_s", "e_m", "n_m"]
-STRIDE_COLUMNS = ["t_start_s", "t_end_s", "length_m", "length_std_m"]
+FUSION_STEP_COLUMNS = ("t_s", "step_length_m", "step_length_std_m")  # what the fusion reads of a steps table
+FUSION_STRIDE_COLUMNS = ("t_start_s", "t_end_s", "length_m", "length_std_m")  # what it reads of a strides table
 BOUT_START_HEADING_STD_RAD = 0.5  # heading change of a step whose change is unknown (a bout's first step without heading_rad)
-
-
-def wrap_rad(angle: np.ndarray | float) -> np.ndarray | float:
-    """Wrap to [-pi, pi)."""
-    return (np.asarray(angle) + np.pi) % (2.0 * np.pi) - np.pi
 
 
 @dataclass
@@ -62,15 +55,6 @@ class Problem:
         return np.diff(self.epoch_t_s)
 
 
-def _require(df: Any, columns: list[str], what: str) -> None:
-    if not isinstance(df, pd.DataFrame):
-        raise InputError(f"{what}: expected a pandas DataFrame, found {type(df).__name__}")
-    missing = [c for c in columns if c not in df.columns]
-    if missing:
-        raise InputError(f"{what}: expected columns {', '.join(columns)}; missing {', '.join(missing)} "
-                         f"(found {', '.join(map(str, df.columns)) or 'none'})")
-
-
 def _floats(df: pd.DataFrame, column: str, what: str) -> np.ndarray:
     try:
         return df[column].to_numpy(dtype=float)
@@ -95,7 +79,7 @@ def prepare(steps: pd.DataFrame, gnss: pd.DataFrame | None, strides: pd.DataFram
     A step lasting more than ``max_step_duration_s`` (steps missed by the detector, a stop, the start after standing)
     is a *gap*: the displacement over it is known only to ``gap_speed_std_mps`` times its duration, along and across,
     so that GNSS, not the step model, says where the walker went."""
-    _require(steps, STEP_COLUMNS, "steps")
+    require_table(steps, FUSION_STEP_COLUMNS, "steps")
     if "heading_change_rad" not in steps.columns and "heading_rad" not in steps.columns:
         raise InputError("steps: expected a heading_change_rad or heading_rad column, found neither")
     if len(steps) == 0:
@@ -177,7 +161,7 @@ def _add_gnss(problem: Problem, gnss: pd.DataFrame, default_h_acc_m: float, tole
     further out is not used (warning); an exact duplicate row is used once (warning); two different fixes at the
     same time are an InputError. A fix inside a gap step gets ``gap_speed_std_mps`` times its time to the nearest
     epoch added (in quadrature) to its accuracy: the path inside a gap is not the straight line between its ends."""
-    _require(gnss, GNSS_COLUMNS, "gnss")
+    require_table(gnss, GNSS_LOCAL_COLUMNS, "gnss")
     problem.gnss_n_rows = len(gnss)
     if len(gnss) == 0:
         return
@@ -228,7 +212,7 @@ def _add_gnss(problem: Problem, gnss: pd.DataFrame, default_h_acc_m: float, tole
 def _add_strides(problem: Problem, strides: pd.DataFrame) -> None:
     """Stride records -> range constraints between the epochs nearest to their start and end (any source; the
     ``source`` column names it, ``"stride"`` where the table has none)."""
-    _require(strides, STRIDE_COLUMNS, "strides")
+    require_table(strides, FUSION_STRIDE_COLUMNS, "strides")
     if len(strides) == 0:
         return
     t0, t1 = _floats(strides, "t_start_s", "strides"), _floats(strides, "t_end_s", "strides")

@@ -9,8 +9,9 @@ import pandas as pd
 
 from pdr.base import Algorithm
 from pdr.errors import InputError
-from pdr.fusion._inputs import empty_trajectory, prepare, wrap_rad
+from pdr.fusion._inputs import empty_trajectory, prepare
 from pdr.fusion.graph import CHI2_2DOF_999, trajectory_frame
+from pdr.schema import wrap_rad
 from pdr.step_length import RegressionStepLength
 
 CHI2_1DOF_999 = 10.83  # 99.9% quantile of chi-square with 1 degree of freedom

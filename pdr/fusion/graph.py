@@ -13,7 +13,7 @@ import scipy.sparse.linalg
 from pdr.base import Algorithm
 from pdr.errors import InputError, warn
 from pdr.fusion import factors
-from pdr.fusion._inputs import BOUT_START_HEADING_STD_RAD, Problem, empty_trajectory, prepare, wrap_rad
+from pdr.fusion._inputs import BOUT_START_HEADING_STD_RAD, Problem, empty_trajectory, prepare
 from pdr.fusion._linear import (
     SmoothSeries,
     StepModelParams,
@@ -25,6 +25,7 @@ from pdr.fusion._linear import (
     step_model_params,
     zero_series,
 )
+from pdr.schema import wrap_rad
 from pdr.step_length import RegressionStepLength
 
 GNSS_FACTORS = ("shifted", "interpolated")

@@ -52,15 +52,13 @@ from scipy.signal import butter, sosfiltfilt
 
 from pdr.constants import GRAVITY_MPS2
 from pdr.errors import InputError, warn
+from pdr.io.recording import TRUNK_PLACEMENTS
+from pdr.schema import BOUT_COLUMNS
 from pdr.signals.resample import UniformImu
 from pdr.step_length.models import LEG_LENGTH_PER_HEIGHT
 
-BOUT_COLUMNS = ("bout_id", "t_start_s", "t_end_s", "n_steps", "distance_m", "speed_mps", "cadence_spm", "step_length_m",
-                "step_length_cv", "vertical_lift_m", "speed_variation_mps", "power_gravity_w", "power_inertia_w",
-                "power_external_w", "mechanics_source")
 STEP_COLUMNS = ("bout_id", "t_start_s", "t_end_s", "speed_mps", "lift_m", "speed_range_mps", "work_gravity_j",
                 "work_inertia_j", "work_external_j")
-TRUNK_PLACEMENTS = ("waist", "trunk")  # sensors that move with the trunk (lower back, sacrum, belt)
 MIN_GNSS_RATE_HZ = 4.5  # the seed's DGPS ran at 5 Hz: about three fixes per step
 MAX_GNSS_H_ACC_M = 0.05  # differential code and phase solutions agree within 5 cm (the seed, after Perrin 1999)
 GNSS_GRID_HZ = 50.0  # the fixes are interpolated onto this grid to be cut at the contacts

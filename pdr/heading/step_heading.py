@@ -10,6 +10,7 @@ from scipy.ndimage import minimum_filter1d
 from pdr.base import Algorithm
 from pdr.constants import FLIGHT_MAX_SPECIFIC_FORCE_G, GRAVITY_MPS2, WALK_MIN_SPECIFIC_FORCE_G
 from pdr.errors import InputError, warn
+from pdr.schema import wrap_rad
 from pdr.signals.attitude import Attitude, earth_acceleration, rotate, yaw_increments
 from pdr.signals.resample import UniformImu
 
@@ -19,11 +20,6 @@ from pdr.signals.resample import UniformImu
 VERTICAL_LOWPASS_HZ = 10.0  # keeps the flight trough (~0.1 s), drops the heel-strike ringing
 
 HEADING_COLUMNS = ["heading_rad", "heading_change_rad", "heading_change_std_rad", "mag_heading_rad", "mag_heading_std_rad"]
-
-
-def wrap(a: np.ndarray) -> np.ndarray:
-    """Angles into (-pi, pi]."""
-    return np.angle(np.exp(1j * np.asarray(a, float)))
 
 
 def _bandpass(acc_enu: np.ndarray, rate_hz: float, step_s: float) -> np.ndarray | None:
@@ -89,7 +85,7 @@ def _direction(sums: np.ndarray, count: np.ndarray) -> tuple[np.ndarray, np.ndar
     theta = np.where(proj < 0, theta + np.pi, theta)
     share = (l1 - l2) / np.maximum(l1 + l2, 1e-12)
     norm = np.sqrt(np.maximum(l1, 1e-12) * np.maximum(vv, 1e-12))
-    return wrap(theta), share * np.minimum(1.0, np.abs(proj) / norm)
+    return wrap_rad(theta), share * np.minimum(1.0, np.abs(proj) / norm)
 
 
 def walking_direction(acc_enu: np.ndarray, rate_hz: float, step_s: float) -> tuple[float, float]:
@@ -238,7 +234,7 @@ class AttitudeStepHeading(Algorithm):
             d, qual = _direction(c[w_hi] - c[w_lo], w_hi - w_lo)
             self.direction_rad_[idx], self.direction_quality_[idx] = d, np.where(w_hi - w_lo > 0, qual, 0.0)
         vote = self.direction_quality_ >= self.min_direction_quality
-        raw_offset = wrap(self.direction_rad_ - yaw_dev)
+        raw_offset = wrap_rad(self.direction_rad_ - yaw_dev)
         offset = nan.copy()
         for b in np.unique(bout):
             idx = np.flatnonzero(bout == b)
@@ -253,7 +249,7 @@ class AttitudeStepHeading(Algorithm):
             offset = np.where(np.isfinite(offset), offset, offset[nearest])
         self.offset_rad_ = offset
         heading_unwrapped = yaw_dev + np.unwrap(offset)
-        self.heading_rad_ = wrap(heading_unwrapped)
+        self.heading_rad_ = wrap_rad(heading_unwrapped)
         change = np.diff(yaw_dev, prepend=yaw_dev[0])  # the gyro's turn between steps; the offset is not in it
         self.heading_change_rad_ = change
         dt = np.diff(t, prepend=t[0])
@@ -281,5 +277,5 @@ class AttitudeStepHeading(Algorithm):
         if (~attitude.mag_disturbed).any():
             trusted &= ~attitude.mag_disturbed
         ok = trusted[i_step]
-        self.mag_heading_rad_ = np.where(ok, wrap(self.heading_rad_ + delta[i_step]), np.nan)
+        self.mag_heading_rad_ = np.where(ok, wrap_rad(self.heading_rad_ + delta[i_step]), np.nan)
         self.mag_heading_std_rad_ = np.where(ok, self.mag_heading_std_rad, np.nan)

@@ -24,6 +24,7 @@ PLACEMENTS = (
     "waist", "trunk", "pocket", "hand", "bag", "arm", "neck", "head",
     "foot_left", "foot_right", "shank_left", "shank_right", "unknown",
 )
+TRUNK_PLACEMENTS = ("waist", "trunk")  # sensors that move with the trunk (lower back, sacrum, belt)
 SUBJECT_KEYS = (
     "height_m", "mass_kg", "leg_length_m", "sensor_height_m", "thigh_length_m", "shank_length_m", "foot_length_m",
 )

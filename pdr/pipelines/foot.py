@@ -23,9 +23,9 @@ from pdr.foot import DoubleFeetCalibration, FootStepTrackerStride, ZeroVelocityD
 from pdr.foot._checks import check_pair, foot_imu_arrays
 from pdr.foot.footstep_tracker import empty_strides
 from pdr.io.recording import Recording
+from pdr.schema import STRIDE_COLUMNS
 from pdr.signals.faults import clipped_samples
 
-STRIDE_COLUMNS = ["t_start_s", "t_end_s", "foot", "length_m", "length_std_m", "source"]
 METHODS = {"zupt_ins": ZuptInsStride, "footstep_tracker": FootStepTrackerStride}
 SECTION_KEYS = {"method", "double_feet", "zero_velocity", "zupt_ins", "footstep_tracker", "double_feet_calibration"}
 GYR_SATURATION_MIN_RADPS = 4.0  # 230 deg/s: below this a flat top is a resting sensor, not a clipped one

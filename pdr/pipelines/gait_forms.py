@@ -25,7 +25,7 @@ from pdr.eval.metrics import match_events
 from pdr.gait.cycles import empty_cycles, foot_cycles, foot_layout, imu_cycles, imu_layout
 from pdr.gait.forms import FORMS_COLUMNS, LEG_LENGTH_PER_HEIGHT, FourierGaitForms, load_forms
 from pdr.io.atomic import atomic_path, write_csv
-from pdr.io.recording import Recording, load_recording
+from pdr.io.recording import TRUNK_PLACEMENTS, Recording, load_recording
 from pdr.pipelines.foot import foot_imus
 from pdr.pipelines.steps import detect_steps
 from pdr.signals import ImuSignals
@@ -37,7 +37,6 @@ MIN_STEPS_PER_MODEL = 30  # fewer matched steps than this do not fit a per-form 
 # run, turns; shoe IMU, a few recordings: level walking, turns, stairs up and down) -- see FourierGaitForms.n_forms
 BODY_N_FORMS = 10
 FOOT_N_FORMS = 6
-TRUNK_PLACEMENTS = ("waist", "trunk")
 GAIT_FORMS_KEYS = {"forms", "forms_file", "n_forms", "smoothing", "cycle_speed_check", "cycle_turn_check"}
 CLASSIFY_KEYS = ("smoothing", "cycle_speed_check", "cycle_turn_check")  # FourierGaitForms settings that [gait_forms] may set
 

@@ -1,7 +1,8 @@
 """Strides from a leg-camera video: optical flow, then the SLIP model fitted to it (Liu, MS thesis).
 
 Config sections: ``[flow]`` (CorrelationOpticalFlow parameters; defaults scaled to the frame size) and
-``[slip_of]`` (SlipOpticalFlowStride parameters; body lengths default to the recording's ``[subject]``).
+``[slip_of]`` (SlipOpticalFlowStride parameters; body lengths from the recording's ``[subject]`` by
+:meth:`pdr.slip.model.SlipBody.from_user`: the lengths given, Winter's ratios to the height for the others).
 """
 
 from __future__ import annotations
@@ -13,10 +14,9 @@ from pdr.errors import InputError
 from pdr.flow import CameraModel, CorrelationOpticalFlow, read_video
 from pdr.io.recording import Recording
 from pdr.slip.fit import SlipOpticalFlowStride
+from pdr.slip.model import SlipBody
 
-# The SLIP's shank reaches the ground (knee to heel); the subject's shank_length_m ends at the ankle.
-ANKLE_HEIGHT_RATIO = 0.039  # ankle height / body height (Winter 2009, Table 4.1)
-DEFAULT_HEIGHT_M = 1.75
+DEFAULT_HEIGHT_M = 1.75  # a subject without a height: an adult of average height
 
 
 def forward_flow(flow: pd.DataFrame) -> np.ndarray:
@@ -51,20 +51,17 @@ def camera_strides(rec: Recording, config: dict) -> pd.DataFrame | None:
     flow_est = CorrelationOpticalFlow.from_config({**flow_defaults, **config.get("flow", {})}).estimate(frames, t)
     flow = flow_est.flow_
     subject = rec.subject
+    lengths = {k: float(subject[k]) for k in ("leg_length_m", "shank_length_m", "thigh_length_m", "foot_length_m")
+               if k in subject}
+    body = SlipBody.from_user(float(subject.get("height_m", DEFAULT_HEIGHT_M)), **lengths)
     slip_defaults = {
+        "thigh_length_m": body.thigh_length_m,
+        "shank_length_m": body.shank_length_m,
+        "foot_length_m": body.foot_length_m,
         "camera_from_knee_m": cam.distance_from_knee_m,
         "focal_px": cam.focal_px,
         "foot": cam.side,
     }
-    if "thigh_length_m" in subject:
-        slip_defaults["thigh_length_m"] = float(subject["thigh_length_m"])
-    if "shank_length_m" in subject:
-        ankle = ANKLE_HEIGHT_RATIO * float(subject.get("height_m", DEFAULT_HEIGHT_M))
-        slip_defaults["shank_length_m"] = float(subject["shank_length_m"]) + ankle
-    if "foot_length_m" in subject:
-        slip_defaults["foot_length_m"] = float(subject["foot_length_m"])
-    if "mass_kg" in subject:
-        slip_defaults["mass_kg"] = float(subject["mass_kg"])
     est = SlipOpticalFlowStride.from_config({**slip_defaults, **config.get("slip_of", {})})
     est.estimate(flow["t_s"].to_numpy(), forward_flow(flow), flow["quality"].to_numpy())
     return est.strides_.reset_index(drop=True)

@@ -6,7 +6,7 @@ import pandas as pd
 
 from pdr.errors import InputError, warn
 from pdr.heading import AttitudeStepHeading
-from pdr.io.recording import Recording
+from pdr.io.recording import TRUNK_PLACEMENTS, Recording
 from pdr.pipelines.not_walking import min_step_rate_hz
 from pdr.signals import ImuSignals
 from pdr.steps import PeakStepDetection, WaveletStepDetection, acc_norm_signal, step_features
@@ -23,7 +23,7 @@ def empty_steps_table() -> pd.DataFrame:
     return pd.DataFrame({c: pd.Series(dtype=int if c == "bout_id" else float) for c in STEPS_COLUMNS})
 
 
-TRUNK_PLACEMENTS = ("waist", "trunk", "head")  # sensors that see every step: the gait period is never a stride
+EVERY_STEP_PLACEMENTS = (*TRUNK_PLACEMENTS, "head")  # sensors that see every step: the gait period is never a stride
 PHONE_PLACEMENTS = ("hand", "pocket", "bag", "arm", "neck", "unknown")  # where a phone is carried, taken out, put away
 
 
@@ -37,7 +37,7 @@ def make_detector(section: dict | None, placement: str = "unknown"):
     method = section.pop("method", "wavelet")
     if method not in DETECTORS:
         raise InputError(f"configuration [steps]: expected method one of {', '.join(DETECTORS)}, found {method!r}")
-    if method == "wavelet" and placement in TRUNK_PLACEMENTS:
+    if method == "wavelet" and placement in EVERY_STEP_PLACEMENTS:
         section.setdefault("stride_check", False)
     if method == "wavelet" and placement in PHONE_PLACEMENTS:
         section.setdefault("leave_out_handling", True)

@@ -25,24 +25,14 @@ import numpy as np
 import pandas as pd
 
 from pdr import __version__
-from pdr.errors import InputError
-from pdr.gait.mechanics import BOUT_COLUMNS
 from pdr.geo import en_to_latlon
 from pdr.io.atomic import write_csv, write_text
+from pdr.schema import BOUT_COLUMNS, STEPS_COLUMNS, STRIDE_COLUMNS, TRAJECTORY_COLUMNS, require_table
 
 CSV_FLOAT_FORMAT = "%.15g"  # prints the rounded values exactly (15 significant digits round-trip a decimal)
 # fixed decimals by unit suffix: microseconds, 0.1 mm, microradians, 1e-4 Hz, 1e-9 deg (0.1 mm)
 DECIMALS_BY_SUFFIX = {"_s": 6, "_m": 4, "_rad": 6, "_hz": 4, "_deg": 9}
-TRAJECTORY_COLUMNS = ("t_s", "e_m", "n_m", "heading_rad", "e_std_m", "n_std_m")
-STEPS_COLUMNS = ("step_id", "t_s", "step_length_m", "step_length_std_m", "step_freq_hz", "heading_rad", "source")
-STRIDES_COLUMNS = ("t_start_s", "t_end_s", "foot", "length_m", "length_std_m", "source")
 GPX_NS = "http://www.topografix.com/GPX/1/1"
-
-
-def _require(df: pd.DataFrame, columns: tuple[str, ...], what: str) -> None:
-    missing = [c for c in columns if c not in df.columns]
-    if missing:
-        raise InputError(f"{what}: expected columns {', '.join(columns)}, found {', '.join(map(str, df.columns)) or 'none'}")
 
 
 def fixed_decimals(df: pd.DataFrame) -> pd.DataFrame:
@@ -65,7 +55,7 @@ def _write_table(path: Path, df: pd.DataFrame) -> None:
 
 def trajectory_table(traj: pd.DataFrame, origin: tuple[float, float] | None) -> pd.DataFrame:
     """The ``trajectory.csv`` table: the contract columns first, plus ``lat_deg, lon_deg`` when ``origin`` is known."""
-    _require(traj, TRAJECTORY_COLUMNS, "trajectory")
+    require_table(traj, TRAJECTORY_COLUMNS, "trajectory")
     table = traj[list(TRAJECTORY_COLUMNS)].astype(float).reset_index(drop=True)
     if origin is not None:
         lat, lon = en_to_latlon(table["e_m"].to_numpy(), table["n_m"].to_numpy(), origin)
@@ -75,7 +65,7 @@ def trajectory_table(traj: pd.DataFrame, origin: tuple[float, float] | None) -> 
 
 def steps_table(steps: pd.DataFrame) -> pd.DataFrame:
     """The ``steps.csv`` table: contract columns in contract order, then ``bout_id`` when present."""
-    _require(steps, STEPS_COLUMNS, "steps")
+    require_table(steps, STEPS_COLUMNS, "steps")
     extra = [c for c in ("bout_id",) if c in steps.columns]
     return steps[list(STEPS_COLUMNS) + extra].reset_index(drop=True)
 
@@ -89,13 +79,13 @@ def write_steps_csv(path: Path, steps: pd.DataFrame) -> None:
 
 
 def write_strides_csv(path: Path, strides: pd.DataFrame) -> None:
-    _require(strides, STRIDES_COLUMNS, "strides")
-    _write_table(path, strides[list(STRIDES_COLUMNS)].reset_index(drop=True))
+    require_table(strides, STRIDE_COLUMNS, "strides")
+    _write_table(path, strides[list(STRIDE_COLUMNS)].reset_index(drop=True))
 
 
 def write_bouts_csv(path: Path, bouts: pd.DataFrame) -> None:
     """``bouts.csv`` (:data:`pdr.gait.mechanics.BOUT_COLUMNS`); speeds to 0.1 mm/s, cadence and powers to 0.01."""
-    _require(bouts, BOUT_COLUMNS, "bouts")
+    require_table(bouts, BOUT_COLUMNS, "bouts")
     table = bouts[list(BOUT_COLUMNS)].reset_index(drop=True)
     for col, decimals in (("speed_mps", 4), ("speed_variation_mps", 4), ("cadence_spm", 2), ("step_length_cv", 4),
                           ("power_gravity_w", 2), ("power_inertia_w", 2), ("power_external_w", 2)):
@@ -144,7 +134,7 @@ def tum_text(traj: pd.DataFrame) -> str:
 
     This is the format ``evo`` reads (``evo_traj tum trajectory.tum``); the leading ``#`` line is a comment.
     """
-    _require(traj, TRAJECTORY_COLUMNS, "trajectory")
+    require_table(traj, TRAJECTORY_COLUMNS, "trajectory")
     q = yaw_to_quaternion_xyzw(traj["heading_rad"].to_numpy())
     lines = ["# t x y z qx qy qz qw  (pdr: x east, y north, metres; yaw counter-clockwise from east)"]
     for t, e, n, (qx, qy, qz, qw) in zip(traj["t_s"].to_numpy(), traj["e_m"].to_numpy(), traj["n_m"].to_numpy(), q):

@@ -17,6 +17,12 @@ from scipy.integrate import solve_ivp
 from pdr.constants import GRAVITY_MPS2
 from pdr.errors import InputError
 
+# Winter (2009, Biomechanics and Motor Control of Human Movement, Table 4.1 / Fig. 4.1), fractions of body height H.
+HIP_HEIGHT_RATIO = 0.530  # greater trochanter above the floor
+KNEE_HEIGHT_RATIO = 0.285  # knee joint above the floor
+ANKLE_HEIGHT_RATIO = 0.039  # ankle joint above the floor
+FOOT_LENGTH_RATIO = 0.152  # heel to toe
+
 
 @dataclasses.dataclass(frozen=True)
 class SlipBody:
@@ -38,6 +44,36 @@ class SlipBody:
             v = getattr(self, f.name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise InputError(f"SlipBody: expected a positive {f.name}, found {v!r}")
+
+    @classmethod
+    def from_user(cls, height_m: float, *, leg_length_m: float | None = None, shank_length_m: float | None = None,
+                  thigh_length_m: float | None = None, foot_length_m: float | None = None) -> "SlipBody":
+        """The SLIP body from what a user knows: the height and, if measured, the leg length (floor to the greater
+        trochanter), the shank (knee to ankle joint), the thigh and the foot.
+
+        Missing lengths come from Winter's ratios to height (:data:`HIP_HEIGHT_RATIO`, ...); a measured leg length
+        rescales the Winter knee height (people differ most in leg proportion, not in the split of the leg). The
+        SLIP's shank runs from the knee to the ground: the knee-to-ankle shank plus the Winter ankle height. The
+        mass stays the default: the SLIP's motion depends on stiffness / mass only, and the stiffness is fitted.
+        """
+        for name, v in (("height_m", height_m), ("leg_length_m", leg_length_m), ("shank_length_m", shank_length_m),
+                        ("thigh_length_m", thigh_length_m), ("foot_length_m", foot_length_m)):
+            if v is not None and not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise InputError(f"SlipBody.from_user: expected a positive {name}, found {v!r}")
+        h = float(height_m)
+        leg = HIP_HEIGHT_RATIO * h if leg_length_m is None else float(leg_length_m)
+        if shank_length_m is not None:
+            knee = float(shank_length_m) + ANKLE_HEIGHT_RATIO * h
+        elif thigh_length_m is not None and leg_length_m is not None:
+            knee = leg - float(thigh_length_m)
+        else:
+            knee = KNEE_HEIGHT_RATIO * h * leg / (HIP_HEIGHT_RATIO * h)
+        thigh = leg - knee if thigh_length_m is None else float(thigh_length_m)
+        if not 0.25 < knee / (knee + thigh) < 0.75:
+            raise InputError(f"SlipBody.from_user: expected a knee between hip and floor, found thigh {thigh:.3f} m "
+                             f"and knee height {knee:.3f} m (leg {leg:.3f} m)")
+        foot = FOOT_LENGTH_RATIO * h if foot_length_m is None else float(foot_length_m)
+        return cls(thigh_length_m=thigh, shank_length_m=knee, foot_length_m=foot)
 
     @property
     def leg_length_m(self) -> float:

@@ -28,7 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from pdr.errors import warn
-from pdr.io.recording import check_subject
+from pdr.io.recording import TRUNK_PLACEMENTS, check_subject
 from pdr.step_length.io import load_model, model_from_config
 from pdr.step_length.models import (
     LEG_LENGTH_PER_HEIGHT,
@@ -38,7 +38,6 @@ from pdr.step_length.models import (
     ZijlstraStepLength,
 )
 
-TRUNK_PLACEMENTS = ("waist", "trunk")
 
 
 def body_model(subject: dict[str, Any] | None, placement: str) -> tuple[StepLengthModel, dict[str, Any]]:

@@ -119,7 +119,8 @@ class WaveletStepDetection(Algorithm):
     signal : ``"norm"`` (|a|) or ``"vertical"`` (a along the low-passed gravity direction); both orientation-free.
     bout_pad_s : walking bouts are widened by this (a window half walking already votes for walking).
     stride_check : whether a gait period may be a stride (thigh, arm); False for a sensor on the trunk (waist,
-        lower back, chest, head), which sees every step. See :func:`pdr.steps.gait.step_period_from_acf`.
+        lower back, chest, head), which sees every step. See :func:`pdr.steps.gait.step_period_from_acf` and, along a
+        walking run, :func:`pdr.steps.gait.resolve_octaves`.
     track_cadence : resample each bout at a uniform gait phase (the kept octave follows a changing cadence)
         instead of at one rate per bout.
     leave_out_handling : maxima inside the phone's handling (:class:`pdr.steps.handling.AttitudeHandlingDetection`:
