@@ -23,6 +23,7 @@ def recording_bouts(rec: Recording, steps: pd.DataFrame, gnss: pd.DataFrame | No
         fixes = gnss.assign(u_m=rec.gnss[alt].to_numpy(float) if alt else np.nan)
         fixes = fixes[~fixes["masked"].to_numpy(bool)]
     mass = rec.subject.get("mass_kg")
-    return walking_bouts(steps, placement=rec.placement, imu=(signals or ImuSignals(rec.imu)).uniform if len(steps) else None, gnss=fixes,
+    imu = (signals or ImuSignals(rec.imu)).uniform if len(steps) else None
+    return walking_bouts(steps, placement=rec.placement, imu=imu, gnss=fixes,
                          mass_kg=None if mass is None else float(mass),
                          sensor_above_hip_m=sensor_above_hip_m(rec.subject), what=rec.id)

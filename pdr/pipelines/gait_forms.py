@@ -208,8 +208,8 @@ def classify_forms(rec: Path, forms: Path, out: Path, *, config_path=None) -> Pa
     return Path(out)
 
 
-def per_form_step_lengths(rec: Recording, steps: pd.DataFrame, section: dict[str, Any],
-                          base_dir: Path | None = None, *, signals: ImuSignals | None = None) -> tuple[pd.DataFrame, dict[str, Any]]:
+def per_form_step_lengths(rec: Recording, steps: pd.DataFrame, section: dict[str, Any], base_dir: Path | None = None, *,
+                          signals: ImuSignals | None = None) -> tuple[pd.DataFrame, dict[str, Any]]:
     """``pdr run`` with ``[gait_forms] forms = "forms.json"``: classify the cycles of ``rec`` and replace the step
     lengths (``step_length_m``, ``step_length_std_m``) of the steps in each form by that form's step model from the
     forms file (steps of a form without a model keep the configured model's). Returns the steps (with a ``form``

@@ -56,7 +56,8 @@ def detect_steps(rec: Recording, config: dict) -> pd.DataFrame:
     return steps_table(rec, detector, AttitudeStepHeading.from_config(config.get("heading")))
 
 
-def steps_table(rec: Recording, detector, heading: AttitudeStepHeading, signals: ImuSignals | None = None) -> pd.DataFrame:
+def steps_table(rec: Recording, detector, heading: AttitudeStepHeading,
+                signals: ImuSignals | None = None) -> pd.DataFrame:
     """The steps table of ``rec`` from a step detector and a heading estimator (see :func:`detect_steps`); ``signals``:
     the main IMU's shared signals (default: computed here)."""
     signals = signals or ImuSignals(rec.imu)
