@@ -167,7 +167,7 @@ def _steps_with_lengths(rec, config: dict) -> pd.DataFrame:
 def _sim_walk(name: str, seed: int) -> dict:
     """A simulated recording (pdr.sim) through the `pdr run` front end; truth from its reference/."""
     from pdr.config import load_config
-    from pdr.pipelines.run import gnss_local, gnss_settings
+    from pdr.pipelines.pipeline import gnss_local, gnss_settings
     from pdr.sim import simulate
 
     with open(SIM_CONFIGS / name, "rb") as fh:

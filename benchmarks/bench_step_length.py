@@ -337,7 +337,7 @@ def _dgps_config(tmp: Path) -> Path:
 def _simulated_case(tmp: Path, seed: int, plot: bool, config: Path = SIM_CONFIG) -> dict:
     """One simulated walk: calibrate with its GPS part, dead-reckon the part without GPS; the filter's convergence."""
     from pdr.io.tomlio import read_toml
-    from pdr.pipelines.run import gnss_local, gnss_settings
+    from pdr.pipelines.pipeline import gnss_local, gnss_settings
     from pdr.sim import simulate_to_disk
 
     rec = load_recording(simulate_to_disk(config, tmp / f"{config.stem}_{seed}", seed=seed, force=True))

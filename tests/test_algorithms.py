@@ -240,6 +240,7 @@ ACTIONS = {
     "PeakStepDetection": lambda w, r: ("detect", (w["u"],), {}),
     "WaveletStepDetection": lambda w, r: ("detect", (w["u"],), {}),
     "AttitudeHandlingDetection": lambda w, r: ("detect", (w["u"],), {}),
+    "Pipeline": lambda w, r: ("run", (w["rec"],), {}),
 }
 
 

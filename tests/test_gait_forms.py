@@ -281,6 +281,12 @@ def test_run_uses_per_form_step_models(sim_recs, tmp_path):
         population.write_text('[step_length]\nmodel = "regression"\n')  # the height-free population regression
         plain = run_recording(sim_recs[1], tmp_path / "out_plain", config_path=population)
     info = with_forms["gait_forms"]
+    # the per-form models keep their relative lengths: the fusion that ran calibrates one scale; the pipeline's own
+    # fusion parameters (run.json "pipeline") stay as configured
+    run_json = json.loads((tmp_path / "out_forms" / "run.json").read_text())
+    ran = run_json["config"]["fusion"]["params"]
+    assert (ran["calibrate_step_model"], ran["calibrate_step_scale"]) == (False, True)
+    assert (run_json["pipeline"]["fusion"]["calibrate_step_model"], run_json["pipeline"]["fusion"]["calibrate_step_scale"]) == (True, False)
     assert info["n_cycles"] > 50 and sum(info["steps_per_form_model"].values()) > 100
     steps = pd.read_csv(tmp_path / "out_forms" / "steps.csv")
     assert len(steps) == plain["n_steps"]

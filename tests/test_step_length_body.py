@@ -189,7 +189,7 @@ def test_graph_warns_when_the_calibration_does_not_converge_and_keeps_the_model(
     rec = simulate({"route": {"waypoints_m": [[0, 0], [100, 0], [100, 60]]},
                     "imu": [{"placement": "pocket", "rate_hz": 100.0}],
                     "segment": [{"duration_s": 2, "speed_mps": 0}, {"duration_s": 60, "speed_mps": 1.4}]}, seed=6)
-    from pdr.pipelines.run import fusion_gnss, gnss_local, gnss_settings
+    from pdr.pipelines.pipeline import fusion_gnss, gnss_local, gnss_settings
     from pdr.pipelines.steps import detect_steps
 
     with collect_warnings():

@@ -26,7 +26,7 @@ from pdr.calibration.segments import landmark_distances, trajectory_distances
 from pdr.config import load_config
 from pdr.errors import InputError
 from pdr.io.recording import load_recording, read_csv
-from pdr.pipelines.run import gnss_local, gnss_settings
+from pdr.pipelines.pipeline import gnss_local, gnss_settings
 from pdr.pipelines.steps import detect_steps
 from pdr.step_length import choose_model, save_model
 

@@ -35,9 +35,8 @@ LENGTH_SENSORS = {"imu", "acc"}
 HEADING_SENSORS = {"imu", "gyr"}
 
 
-def sensor_faults(imu: pd.DataFrame, gnss: pd.DataFrame | None, section: dict[str, Any] | None) -> SensorFaultDetection:
-    """Detect the faults of the main IMU and of the GNSS fixes (local frame, with ``masked``)."""
-    detector = SensorFaultDetection.from_config(section)
+def sensor_faults(detector: SensorFaultDetection, imu: pd.DataFrame, gnss: pd.DataFrame | None) -> SensorFaultDetection:
+    """Detect the faults of the main IMU and of the GNSS fixes (local frame, with ``masked``) with ``detector``."""
     if gnss is not None:
         gnss = gnss.assign(e_m=np.where(gnss["masked"], np.nan, gnss["e_m"]),
                            n_m=np.where(gnss["masked"], np.nan, gnss["n_m"]))

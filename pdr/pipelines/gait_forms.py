@@ -28,7 +28,7 @@ from pdr.io.atomic import atomic_path, write_csv
 from pdr.io.recording import TRUNK_PLACEMENTS, Recording, load_recording
 from pdr.pipelines.foot import foot_imus
 from pdr.pipelines.steps import detect_steps
-from pdr.signals import estimate_attitude, uniform_imu
+from pdr.signals import ImuSignals
 from pdr.step_length.io import model_from_config, model_from_dict, model_to_dict
 
 STEP_MATCH_TOLERANCE_S = 0.15  # a detected step and a reference contact closer than this are the same step
@@ -50,9 +50,11 @@ def _leg_length_m(rec: Recording) -> float:
     return float("nan")
 
 
-def recording_cycles(rec: Recording, config: dict | None = None, *, steps: pd.DataFrame | None = None) -> pd.DataFrame:
+def recording_cycles(rec: Recording, config: dict | None = None, *, steps: pd.DataFrame | None = None,
+                     signals: ImuSignals | None = None) -> pd.DataFrame:
     """Gait cycles of ``rec`` with their Fourier features (:mod:`pdr.gait.cycles`) and a ``recording`` and a
-    ``leg_length_m`` and a ``trunk_sensor`` column. ``steps``: the steps table with ``step_length_m`` when already computed (``pdr run``)."""
+    ``leg_length_m`` and a ``trunk_sensor`` column. ``steps``: the steps table with ``step_length_m`` when already
+    computed, ``signals`` the main IMU's shared signals (``pdr run``)."""
     config = config or {}
     feet = foot_imus(rec)
     if feet:
@@ -69,8 +71,8 @@ def recording_cycles(rec: Recording, config: dict | None = None, *, steps: pd.Da
             warn(f"{rec.id}: fewer than three steps, no gait cycle")
             cycles = empty_cycles(imu_layout())
         else:
-            u = uniform_imu(rec.imu)
-            cycles = imu_cycles(u, estimate_attitude(u), steps, what=f"{rec.id}: gait cycles")
+            signals = signals or ImuSignals(rec.imu)
+            cycles = imu_cycles(signals.uniform, signals.attitude, steps, what=f"{rec.id}: gait cycles")
     cycles.insert(0, "recording", rec.id)
     cycles["leg_length_m"] = _leg_length_m(rec)
     cycles["trunk_sensor"] = rec.placement in TRUNK_PLACEMENTS  # the pendulum speed needs the trunk's excursion
@@ -206,8 +208,8 @@ def classify_forms(rec: Path, forms: Path, out: Path, *, config_path=None) -> Pa
     return Path(out)
 
 
-def per_form_step_lengths(rec: Recording, steps: pd.DataFrame, section: dict[str, Any], config: dict,
-                          base_dir: Path | None = None) -> tuple[pd.DataFrame, dict[str, Any]]:
+def per_form_step_lengths(rec: Recording, steps: pd.DataFrame, section: dict[str, Any], base_dir: Path | None = None, *,
+                          signals: ImuSignals | None = None) -> tuple[pd.DataFrame, dict[str, Any]]:
     """``pdr run`` with ``[gait_forms] forms = "forms.json"``: classify the cycles of ``rec`` and replace the step
     lengths (``step_length_m``, ``step_length_std_m``) of the steps in each form by that form's step model from the
     forms file (steps of a form without a model keep the configured model's). Returns the steps (with a ``form``
@@ -224,7 +226,7 @@ def per_form_step_lengths(rec: Recording, steps: pd.DataFrame, section: dict[str
     models = {k: model_from_dict(v, f"forms {path}: step model {k!r}") for k, v in (doc.get("step_models") or {}).items()
               if k != "all"}
     steps = steps.copy()
-    cycles = recording_cycles(rec, config, steps=steps)
+    cycles = recording_cycles(rec, steps=steps, signals=signals)
     labelled = forms.classify(cycles).cycles_forms_
     kinds = step_forms(steps, labelled)
     steps["form"] = pd.Series(kinds, dtype=object).fillna("").to_numpy()

@@ -8,7 +8,7 @@ from pdr.errors import InputError, warn
 from pdr.heading import AttitudeStepHeading
 from pdr.io.recording import TRUNK_PLACEMENTS, Recording
 from pdr.pipelines.not_walking import min_step_rate_hz
-from pdr.signals import estimate_attitude, uniform_imu
+from pdr.signals import ImuSignals
 from pdr.steps import PeakStepDetection, WaveletStepDetection, acc_norm_signal, step_features
 
 STEPS_COLUMNS = [
@@ -53,8 +53,15 @@ def detect_steps(rec: Recording, config: dict) -> pd.DataFrame:
     if not isinstance(config, dict):
         raise InputError(f"configuration: expected a dict of sections, found {type(config).__name__}")
     detector = make_detector(config.get("steps"), rec.placement)
-    heading = AttitudeStepHeading.from_config(config.get("heading"))
-    u = uniform_imu(rec.imu)
+    return steps_table(rec, detector, AttitudeStepHeading.from_config(config.get("heading")))
+
+
+def steps_table(rec: Recording, detector, heading: AttitudeStepHeading,
+                signals: ImuSignals | None = None) -> pd.DataFrame:
+    """The steps table of ``rec`` from a step detector and a heading estimator (see :func:`detect_steps`); ``signals``:
+    the main IMU's shared signals (default: computed here)."""
+    signals = signals or ImuSignals(rec.imu)
+    u = signals.uniform
     if u.rate_hz < min_step_rate_hz():
         warn(f"{rec.id}: no steps: sampling rate {u.rate_hz:.1f} Hz is below twice the highest cadence "
              f"({min_step_rate_hz():g} Hz), so steps can not be found")
@@ -75,8 +82,7 @@ def detect_steps(rec: Recording, config: dict) -> pd.DataFrame:
     if len(steps) == 1:
         warn(f"{rec.id}: only one step found")
     feats = step_features(steps, u, acc_norm_signal(u), gnss=rec.gnss)
-    att = estimate_attitude(u)
-    heading.estimate(u, att, steps)
+    heading.estimate(u, signals.attitude, steps)
     table = pd.concat([steps[["t_s", "bout_id"]], feats], axis=1)
     table["heading_rad"] = heading.heading_rad_
     table["heading_change_rad"] = heading.heading_change_rad_
