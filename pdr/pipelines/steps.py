@@ -1,4 +1,4 @@
-"""``pdr steps``: the steps table of INTERFACES.md from a recording (detection, features, heading)."""
+"""``pdr steps``: the steps table (CONTRACT.md) from a recording (detection, features, heading)."""
 
 from __future__ import annotations
 
