@@ -24,7 +24,8 @@ from pdr.flow import CorrelationOpticalFlow, InterpolationOpticalFlow, PhaseCorr
 from pdr.errors import collect_warnings
 from pdr.pipelines.leg_camera import forward_flow
 from pdr.sim.camera import TEXTURES, CameraModel, load_texture, render_leg_camera
-from pdr.sim.gait import LEG_SCALE_SD, Body, GaitUser, WalkKinematics, plan_walk
+from pdr.sim.gait import WalkKinematics
+from pdr.sim.people import LEG_SCALE_SD, Body, GaitUser, plan_walk
 from pdr.sim.route import Route
 from pdr.slip.fit import SlipOpticalFlowStride
 from pdr.slip.model import SlipBody

@@ -324,7 +324,7 @@ def test_magnetometer_deviation_curve_is_calibrated():
 
 
 def test_gate_keeps_long_runs_of_rejected_fixes():
-    from pdr.fusion.graph import gate
+    from pdr.fusion._solve import gate
 
     d2 = np.ones(40)
     d2[3] = 100.0  # a lone outlier

@@ -18,7 +18,7 @@ from pdr.fusion import FactorGraphFusion
 from pdr.fusion._linear import bounded_map
 from pdr.io.recording import check_subject, load_recording, save_recording
 from pdr.sim import simulate
-from pdr.sim.gait import Body, GaitUser
+from pdr.sim.people import Body, GaitUser
 from pdr.step_length import RegressionStepLength, ZijlstraStepLength, body_model, choose_model, load_model
 from conftest import warns
 

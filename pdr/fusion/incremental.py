@@ -13,7 +13,9 @@ from pdr.errors import InputError
 from pdr.fusion import factors
 from pdr.fusion._inputs import empty_trajectory
 from pdr.fusion._linear import deviation_design
-from pdr.fusion.graph import FactorGraphFusion, trajectory_frame, with_deep_stack
+from pdr.fusion._initial import along_track
+from pdr.fusion._solve import with_deep_stack
+from pdr.fusion.graph import FactorGraphFusion, trajectory_frame
 
 _BATCH = inspect.signature(FactorGraphFusion.__init__).parameters  # the shared parameters take the batch defaults
 
@@ -211,7 +213,7 @@ class IncrementalFusion(FactorGraphFusion):
             isam.marginalCovariance(factors.pose_key(k)), final[k, 2])), 0.0)) for k in range(n + 1)])
         self.trajectory_ = trajectory_frame(problem, poses, pos_std)
         self.smoothed_trajectory_ = trajectory_frame(problem, final, final_std)
-        self.step_length_m_ = self._along_track(poses)
+        self.step_length_m_ = along_track(poses)
         self.step_model_ = step_model
         self.gnss_used_ = np.zeros(problem.gnss_n_rows, bool)
         self.gnss_used_[problem.gnss_row] = used

@@ -11,9 +11,8 @@ estimator fits.
 
 Public objects
 --------------
-``Body`` (segment lengths from height and leg proportion), ``GaitUser`` (per-person coefficients, :data:`COHORTS`),
-``plan_walk`` (heel-strike instants
-and target step lengths from speed segments), ``WalkKinematics`` (positions and rotations at any time).
+``WalkKinematics`` (positions and rotations at any time) of a plan from :mod:`pdr.sim.people` (``Body``,
+``GaitUser``, ``plan_walk``).
 
 Frames: world = local east-north-up (m). Segment frames: ``pelvis`` and ``foot_*``: x forward, y left, z up;
 ``thigh_*`` and ``shank_*``: x forward, y right, z along the segment (hip to knee, knee to ankle).
@@ -21,15 +20,12 @@ Frames: world = local east-north-up (m). Segment frames: ``pelvis`` and ``foot_*
 
 from __future__ import annotations
 
-import dataclasses
-from typing import Sequence
-
 import numpy as np
 import pandas as pd
 from scipy.interpolate import CubicSpline
 
-from pdr.constants import GRAVITY_MPS2
-from pdr.errors import InputError, warn
+from pdr.errors import InputError
+from pdr.sim.people import Body, Bout, GaitUser, plan_walk
 from pdr.sim.route import Route
 
 # ------------------------------------------------------------------------------------------------------------------
@@ -53,18 +49,11 @@ WALK_TOE_OFF = 0.62  # phase of toe-off in the walking curves above
 RUN_TOE_OFF = 0.39  # and in the running curves
 PELVIC_TILT_DEG = 10.0  # hip angles are relative to the pelvis, tilted forward: thigh angle = hip - tilt
 
-# Anthropometry (Winter 2009, Table 4.1, fractions of body height H).
-THIGH_RATIO = 0.245
-SHANK_RATIO = 0.246
-FOOT_RATIO = 0.152
-ANKLE_HEIGHT_RATIO = 0.039
-HIP_SEPARATION_RATIO = 0.095  # distance between the hip joint centres
+# Foot geometry (segment lengths: pdr.sim.people.Body).
 HEEL_BEHIND_ANKLE = 0.23  # fraction of the foot length behind the ankle
 ROCKER_RADIUS_FOOT = 1.5  # roll-over radius of the sole, in foot lengths (Hansen et al. 2004: ~0.3 leg length)
 
 FOOT_FLAT_PHASE = (0.03, 0.07, 0.30, 0.12)  # (start, ramp, end, ramp) of foot flat, in phase of the walking curves
-REF_FROUDE_SPEED = 0.45  # v / sqrt(g l) of a natural walking pace
-GAIT_START_FRACTION = 0.5  # the pelvis moves about half a step on the first step of a bout and on the last
 RUN_SPEED_MPS = (2.0, 2.6)  # walk-to-run blend of the curves, from fully walking to fully running
 SEGMENTS = ("pelvis", "thigh_left", "shank_left", "foot_left", "thigh_right", "shank_right", "foot_right")
 JOINTS = ("pelvis", "hip", "knee", "ankle", "heel", "toe")
@@ -94,127 +83,6 @@ def _warp(p: np.ndarray, stance: np.ndarray, curve_toe_off: float) -> np.ndarray
     return p + c * (1.0 - np.cos(2 * np.pi * p)) / (2 * np.pi)
 
 
-@dataclasses.dataclass(frozen=True)
-class Body:
-    """Segment lengths from body height (Winter's ratios) and a per-person leg proportion.
-
-    Attributes: ``thigh_m``, ``shank_m``, ``foot_m`` (heel to toe), ``ankle_height_m``, ``hip_separation_m``,
-    ``leg_length_m`` (standing hip height = thigh + shank + ankle height, about 0.53 H). ``leg_scale`` multiplies
-    thigh and shank: people of one height differ in relative leg length by about 2.5% (1 SD; Bogin & Varela-Silva
-    2010, "Leg length, body proportion, and health").
-    """
-
-    height_m: float = 1.75
-    leg_scale: float = 1.0
-
-    def __post_init__(self):
-        if not 1.0 <= self.height_m <= 2.3:
-            raise InputError(f"subject.height_m: expected 1.0-2.3 m, found {self.height_m}")
-        if not 0.85 <= self.leg_scale <= 1.15:
-            raise InputError(f"subject leg_scale: expected 0.85-1.15, found {self.leg_scale}")
-
-    thigh_m = property(lambda self: THIGH_RATIO * self.leg_scale * self.height_m)
-    shank_m = property(lambda self: SHANK_RATIO * self.leg_scale * self.height_m)
-    foot_m = property(lambda self: FOOT_RATIO * self.height_m)
-    ankle_height_m = property(lambda self: ANKLE_HEIGHT_RATIO * self.height_m)
-    hip_separation_m = property(lambda self: HIP_SEPARATION_RATIO * self.height_m)
-    leg_length_m = property(lambda self: self.thigh_m + self.shank_m + self.ankle_height_m)
-
-    def subject(self, mass_kg: float | None = None) -> dict[str, float]:
-        """The ``[subject]`` table of ``meta.toml``."""
-        out = {"height_m": self.height_m, "leg_length_m": self.leg_length_m, "thigh_length_m": self.thigh_m,
-               "shank_length_m": self.shank_m, "foot_length_m": self.foot_m}
-        if mass_kg is not None:
-            out["mass_kg"] = float(mass_kg)
-        return {k: round(v, 4) for k, v in out.items()}
-
-
-LEG_SCALE_SD = 0.025  # relative leg length, 1 SD (Bogin & Varela-Silva 2010)
-
-
-@dataclasses.dataclass(frozen=True)
-class Cohort:
-    """How a group walks relative to healthy adults: factors on the step length at a given dimensionless speed, on
-    the per-step variability (length and duration), and on the vertical excursion of the pelvis."""
-
-    length_factor: float = 1.0
-    variability_factor: float = 1.0
-    arc_factor: float = 1.0
-
-
-COHORTS = {
-    # healthy adults: the reference
-    "healthy": Cohort(),
-    # older adults: about 10% shorter steps at the same speed, 30% more step-to-step variability (Winter et al. 1990,
-    # "Biomechanical walking pattern changes in the fit and healthy elderly"; Hausdorff 2005, gait variability)
-    "older": Cohort(length_factor=0.90, variability_factor=1.3),
-    # impaired slow gait (multiple sclerosis, Parkinson's, after stroke; scenarios at 0.4-0.9 m/s): about 20% shorter
-    # steps at the same speed, the cadence carrying more of the speed (Comber, Galvin & Coote 2017, meta-analysis of
-    # gait in MS), twice the step-to-step variability (Hausdorff 2005), and a 7% larger pelvis excursion for a given
-    # step: the inverted-pendulum factor fitted on people with MS is 4.587/4 against 4.739/4 for all participants
-    # (Soltani et al. 2021), and (4.739 / 4.587)^2 = 1.07
-    "impaired": Cohort(length_factor=0.80, variability_factor=2.0, arc_factor=1.07),
-}
-
-
-@dataclasses.dataclass(frozen=True)
-class GaitUser:
-    """Per-person gait coefficients (drawn once per simulated person).
-
-    Step length follows a Froude-scaled power law of speed: L / l = c (v_hat / v_ref) ** beta with the dimensionless
-    speed v_hat = v / sqrt(g l) (l = leg length, v_ref = 0.45, about 1.35 m/s for an adult). The exponent beta = 0.42
-    is the preferred speed-step length relation of humans (Grieve 1968; Kuo 2001, "A simple model of bipedal walking
-    predicts the preferred speed-step length relationship"), so with f = v / L the step length grows as
-    f ** (beta / (1 - beta)) = f ** 0.72: concave in frequency, not a line, and each person has their own c and beta
-    (5% and 0.04 SD: individual offsets and curvature). Per-step variability of length has a coefficient of variation
-    ``cv_slow`` at 0.6 m/s falling to ``cv_fast`` at 1.7 m/s and above (Ladetto et al. 2000 observed about 15% and
-    4%). ``arc_gain`` is the pelvis vertical excursion over the compass-gait arc: measured centre-of-mass excursions
-    of 2.7 cm at 0.7 m/s to 4.8 cm at 1.6 m/s (Orendurff et al. 2004) are 0.5-0.65 of the arc; per person N(0.6, 0.04).
-    """
-
-    length_coef: float = 0.78  # step length / leg length at the reference speed
-    length_exponent: float = 0.42
-    cv_slow: float = 0.15
-    cv_fast: float = 0.04
-    cv_time: float = 0.02  # independent step-duration jitter
-    step_width_m: float = 0.10
-    sway_m: float = 0.025  # lateral pelvis sway amplitude
-    pelvic_rotation_deg: float = 4.0
-    obliquity_deg: float = 3.5
-    pitch_deg: float = 1.5
-    arc_gain: float = 0.6  # pelvis vertical excursion / compass-gait arc
-    cohort: str = "healthy"
-
-    @classmethod
-    def draw(cls, rng: np.random.Generator, *, cv_slow: float = 0.15, cv_fast: float = 0.04,
-             cohort: str = "healthy") -> "GaitUser":
-        """A random person of ``cohort`` (population spreads of the coefficients)."""
-        if cohort not in COHORTS:
-            raise InputError(f"subject.cohort: expected one of {', '.join(COHORTS)}, found {cohort!r}")
-        group = COHORTS[cohort]
-        z = rng.standard_normal(8)
-        extra = rng.standard_normal(1)
-        v = group.variability_factor
-        return cls(length_coef=float(0.78 * group.length_factor * (1 + 0.05 * z[0])),
-                   length_exponent=float(np.clip(0.42 + 0.04 * z[1], 0.32, 0.52)),
-                   cv_slow=cv_slow * v, cv_fast=cv_fast * v, cv_time=0.02 * v,
-                   step_width_m=float(np.clip(0.10 + 0.02 * z[2], 0.05, 0.16)),
-                   sway_m=float(np.clip(0.025 + 0.006 * z[3], 0.01, 0.04)),
-                   pelvic_rotation_deg=float(np.clip(4.0 + 1.0 * z[4], 1.5, 7.0)),
-                   obliquity_deg=float(np.clip(3.5 + 0.8 * z[5], 1.5, 6.0)), pitch_deg=float(np.clip(1.5 + 0.4 * z[6], 0.5, 3.0)),
-                   arc_gain=float(np.clip(group.arc_factor * (0.6 + 0.04 * extra[0]), 0.4, 0.75)), cohort=cohort)
-
-    def step_length_m(self, speed_mps, leg_length_m: float):
-        v_hat = np.maximum(np.asarray(speed_mps, float), 0.05) / np.sqrt(GRAVITY_MPS2 * leg_length_m)
-        return leg_length_m * self.length_coef * (v_hat / REF_FROUDE_SPEED) ** self.length_exponent
-
-    def step_freq_hz(self, speed_mps, leg_length_m: float):
-        return np.maximum(np.asarray(speed_mps, float), 0.05) / self.step_length_m(speed_mps, leg_length_m)
-
-    def length_cv(self, speed_mps):
-        return np.interp(speed_mps, [0.6, 1.7], [self.cv_slow, self.cv_fast])
-
-
 def stance_fraction(speed_mps) -> np.ndarray:
     """Stance as a fraction of the gait cycle: ~0.64 slow, 0.60 at 1.5 m/s (walking); 0.40 falling to 0.32 (running)."""
     v = np.asarray(speed_mps, float)
@@ -228,73 +96,6 @@ def run_weight(speed_mps) -> np.ndarray:
     """0 = walking curves, 1 = running curves; smooth in between."""
     return _smoothstep((np.asarray(speed_mps, float) - RUN_SPEED_MPS[0]) / (RUN_SPEED_MPS[1] - RUN_SPEED_MPS[0]))
 
-
-@dataclasses.dataclass
-class Bout:
-    """One walking bout: heel strikes ``t_s[0..n]`` (the first is the start from standing, not a step; the last
-    brings the feet together), gait phase at each (+0.5 per step; integer = left heel strike), target step
-    lengths and the nominal speed of each step (``n`` values)."""
-
-    t_s: np.ndarray
-    phase: np.ndarray
-    target_length_m: np.ndarray
-    speed_mps: np.ndarray
-
-
-def plan_walk(segments: Sequence[tuple[float, float]], user: GaitUser, body: Body, rng: np.random.Generator,
-              t0_s: float = 0.0) -> list[Bout]:
-    """Heel-strike instants and target step lengths for consecutive speed segments ``(duration_s, speed_mps)``.
-
-    A speed of 0 is a stop (standing). Consecutive moving segments form one bout; each step's duration is
-    1 / f(v) and its length L(v) with per-step variability (partly shared with the duration: longer steps take a
-    little longer); the first and last steps of a bout move the pelvis half as far. A bout shorter than three
-    steps is spent standing.
-    """
-    bouts: list[Bout] = []
-    t = t0_s
-    phase = 0.0
-    moving: list[tuple[float, float, float]] = []  # (start, end, speed)
-
-    def close(run):
-        nonlocal phase
-        if not run:
-            return
-        tb, te = run[0][0], run[-1][1]
-        starts = np.array([r[0] for r in run])
-        speeds = np.array([r[2] for r in run])
-        times, lengths, vs = [tb], [], []
-        tk = tb
-        while True:
-            v = float(speeds[np.searchsorted(starts, tk, side="right") - 1])
-            f = float(user.step_freq_hz(v, body.leg_length_m))
-            cv = float(user.length_cv(v))
-            eps, eta = rng.standard_normal(2)
-            dur = (1.0 / f) * float(np.clip(1.0 + 0.3 * cv * eps + user.cv_time * eta, 0.6, 1.5))
-            if tk + dur > te:
-                break
-            tk += dur
-            times.append(tk)
-            lengths.append(float(user.step_length_m(v, body.leg_length_m)) * float(np.clip(1.0 + cv * eps, 0.4, 1.8)))
-            vs.append(v)
-        if len(times) < 4:
-            warn(f"walk: the moving segments from {tb:.1f} s to {te:.1f} s are too short for 3 steps; "
-                 f"the person stands instead")
-        else:
-            n = len(times) - 1
-            lengths[0] *= GAIT_START_FRACTION  # from standing, and back to feet together
-            lengths[-1] *= GAIT_START_FRACTION
-            bouts.append(Bout(np.array(times), phase + 0.5 * np.arange(n + 1), np.array(lengths), np.array(vs)))
-            phase += 0.5 * n
-
-    for duration, speed in segments:
-        if speed > 0:
-            moving.append((t, t + duration, float(speed)))
-        else:
-            close(moving)
-            moving = []
-        t += duration
-    close(moving)
-    return bouts
 
 
 STEP_LENGTH_REF_RATIO = 0.40  # step length (fraction of height) at which the normative curves are used unscaled

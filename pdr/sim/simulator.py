@@ -4,8 +4,8 @@ Scenario keys (TOML; every table but ``[[segment]]`` and ``[route]`` is optional
 
 ``[simulation]`` ``id`` (recording id; default the file name), ``description``.
 ``[subject]`` ``height_m`` (default: drawn, 1.60-1.90 m), ``mass_kg``, ``cohort`` (``healthy``, ``older``, ``impaired``;
-    default healthy; :data:`pdr.sim.gait.COHORTS`). The person's leg proportion, step-length law and pelvis excursion
-    are drawn per seed (:class:`pdr.sim.gait.GaitUser`); ``meta.toml`` ``[subject]`` gets what a user would measure:
+    default healthy; :data:`pdr.sim.people.COHORTS`). The person's leg proportion, step-length law and pelvis excursion
+    are drawn per seed (:class:`pdr.sim.people.GaitUser`); ``meta.toml`` ``[subject]`` gets what a user would measure:
     the height, the leg length and (waist IMU) the sensor height, each to +-1 cm (:data:`MEASURE_STD_M`).
 ``[geo]`` ``origin_lat_deg``, ``origin_lon_deg`` (default 46.5191, 6.5668), ``origin_alt_m`` (default 400).
 ``[route]`` ``waypoints_m`` ([[east, north], ...], the polyline walked), ``loop`` (repeat it, closed, as long as
@@ -48,7 +48,8 @@ from pdr.gait.mechanics import bout_table, step_energies, step_intervals
 from pdr.geo import en_to_latlon
 from pdr.io.recording import Recording, save_recording
 from pdr.io.tomlio import read_toml
-from pdr.sim.gait import LEG_SCALE_SD, Body, GaitUser, WalkKinematics, plan_walk
+from pdr.sim.gait import WalkKinematics
+from pdr.sim.people import LEG_SCALE_SD, Body, GaitUser, plan_walk
 from pdr.sim.gnss import GnssSpec, simulate_gnss
 from pdr.sim.route import Route
 from pdr.sim.sensors import (

@@ -26,7 +26,8 @@ from scipy.spatial import cKDTree
 
 from pdr.errors import InputError
 from pdr.gait.camera_estimator import JOINTS, ThighCameraModel, joint_columns
-from pdr.sim.gait import Body, GaitUser, WalkKinematics, plan_walk
+from pdr.sim.gait import WalkKinematics
+from pdr.sim.people import Body, GaitUser, plan_walk
 from pdr.sim.route import Route
 
 # Nominal speeds of the walking forms (m/s): slow, natural and fast walking (Bohannon 1997: comfortable 1.3-1.4,

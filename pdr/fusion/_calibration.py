@@ -1,0 +1,317 @@
+"""The calibrated parameters of the batch fusion and their updates given the poses.
+
+Parameters that enter the step measurements linearly (step model ``length = A + B f + C v`` after Ladetto et al. 2000,
+or one scale of the steps' own lengths; heading-rate bias; magnetometer deviation) are solved in closed form given
+the poses; the stride scales take a Gauss-Newton step jointly with the poses (:meth:`Calibration.joint_step`). The
+fixed point ``params = update(solve(params))`` is accelerated by Anderson mixing (Walker & Ni 2011).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import NamedTuple
+
+import gtsam
+import numpy as np
+import scipy.sparse
+import scipy.sparse.linalg
+
+from pdr.fusion._initial import along_track
+from pdr.fusion._inputs import BOUT_START_HEADING_STD_RAD, Problem
+from pdr.fusion._linear import (
+    SmoothSeries,
+    StepModelParams,
+    deviation_design,
+    solve_deviation,
+    solve_series,
+    solve_step_model,
+    solve_stride_scales,
+    step_model_params,
+    zero_series,
+)
+from pdr.fusion._solve import Measurements, build_graph, named_blocks
+from pdr.schema import wrap_rad
+from pdr.step_length import RegressionStepLength
+
+
+@dataclasses.dataclass(frozen=True)
+class ParamLayout:
+    """The blocks of the parameter vector, in order: step model ``(A, B, C)``, gyro-bias knots, magnetometer deviation
+    coefficients, one length scale per stride source, one scale of the steps' own lengths (an index)."""
+
+    theta: slice
+    bias: slice
+    deviation: slice
+    stride_scales: slice
+    step_scale: int
+
+    @classmethod
+    def of(cls, n_bias: int, n_deviation: int, n_sources: int) -> ParamLayout:
+        blocks = named_blocks({"theta": 3, "bias": n_bias, "deviation": n_deviation, "stride_scales": n_sources,
+                               "step_scale": 1})
+        return cls(blocks["theta"], blocks["bias"], blocks["deviation"], blocks["stride_scales"],
+                   blocks["step_scale"].start)
+
+    def labelled(self) -> dict[str, slice]:
+        """The blocks by the names a message gives them."""
+        return {"step model": self.theta, "gyro bias": self.bias, "magnetometer deviation": self.deviation,
+                "stride scales": self.stride_scales, "step scale": slice(self.step_scale, self.step_scale + 1)}
+
+
+class Update(NamedTuple):
+    """One closed-form update: the new parameters, the step model's covariance (None unless calibrated), the std of
+    the steps' scale and of each stride source's scale (their priors' where not estimated)."""
+
+    params: np.ndarray
+    model_cov: np.ndarray | None
+    step_scale_std: float
+    stride_scale_std: np.ndarray
+
+
+class AndersonMixing:
+    """Anderson acceleration of a fixed point ``x = g(x)`` with residual ``f = g(x) - x`` (Walker & Ni 2011), over
+    the last ``depth`` differences; restarted on request or when the residual more than doubles."""
+
+    def __init__(self, depth: int):
+        self.depth = depth
+        self._df: list[np.ndarray] = []
+        self._dg: list[np.ndarray] = []
+        self._f = self._g = None
+
+    def next(self, f: np.ndarray, g: np.ndarray, restart: bool) -> np.ndarray:
+        """The next iterate from the residual ``f`` (any scaling) and the mapped point ``g``."""
+        if restart or self._f is None or np.linalg.norm(f) > 2.0 * np.linalg.norm(self._f):
+            self._df.clear()
+            self._dg.clear()
+        else:
+            self._df.append(f - self._f)
+            self._dg.append(g - self._g)
+            del self._df[:-self.depth], self._dg[:-self.depth]
+        self._f, self._g = f, g
+        if not self._df:
+            return g
+        gamma = np.linalg.lstsq(np.column_stack(self._df), f, rcond=None)[0]
+        return g - np.column_stack(self._dg) @ gamma
+
+
+class Calibration:
+    """What a walk lets the fusion estimate, the parameter vector's start and the updates given the poses.
+
+    ``fusion`` is the :class:`~pdr.fusion.FactorGraphFusion` whose parameters apply; ``step_model`` as its ``fuse``.
+    """
+
+    def __init__(self, fusion, problem: Problem, step_model):
+        self.fusion, self.problem = fusion, problem
+        n, n_fix = problem.n_steps, len(problem.gnss_row)
+        self.absolute = n_fix >= 1
+        observable = n_fix >= 2 or len(problem.stride_length_m) > 0
+        self.feats_ok = (np.isfinite(problem.features).all(axis=1) & ~problem.gap if problem.features is not None
+                         else np.zeros(n, bool))
+        regression = step_model is None or isinstance(step_model, RegressionStepLength)
+        self.calibrate = bool(fusion.calibrate_step_model and regression and observable
+                              and problem.features is not None and self.feats_ok.sum() >= 3)
+        # the steps' own lengths (per-form models, or a one-parameter model such as Zijlstra's) times one scale
+        self.own_scale = (step_model is not None and not regression
+                          and len(getattr(step_model, "theta_names", ())) == 1)
+        self.scale_steps = bool((fusion.calibrate_step_scale or (fusion.calibrate_step_model and self.own_scale))
+                                and not self.calibrate and observable)
+        self.model_prior = None
+        if self.calibrate:
+            if step_model is None:
+                step_model = RegressionStepLength.population()
+            self.model_prior = step_model_params(step_model, (fusion.prior_a_std_m, fusion.prior_b_std_m_per_hz,
+                                                              fusion.prior_c_std_m_per_m2ps4))
+        self.step_model = step_model
+        self.has_mag = np.isfinite(problem.mag_rad)
+        self.estimate_bias = n_fix >= 2 or bool(self.has_mag.any())
+        self.sources, self.src, self.scale_prior_std = fusion._stride_sources(problem)
+        n_src = len(self.sources)
+        self.estimate_scales = bool(fusion.calibrate_stride_scales and n_fix >= 2 and n_src > 0)
+        self.bias0 = zero_series(problem.epoch_t_s, fusion.gyro_bias_knot_s)
+        n_dev = deviation_design(np.zeros(1)).shape[1]
+        nb = len(self.bias0.values)
+        self.layout = ParamLayout.of(nb, n_dev, n_src)
+        self.dt = problem.step_duration_s
+        self.known_turn = problem.dtheta_std_rad < BOUT_START_HEADING_STD_RAD
+        self.known_turn[0] = False
+        self.t_step = problem.epoch_t_s[1:]
+        theta0 = self.model_prior.theta if self.calibrate else np.zeros(3)
+        self.params0 = np.concatenate([theta0, self.bias0.values, np.zeros(n_dev), np.ones(n_src), np.ones(1)])
+        # each parameter in metres of effect on the path (convergence test and acceleration)
+        mean_length = float(np.mean(problem.step_length_m)) if n else 1.0
+        mean_speed = mean_length / float(np.median(self.dt)) if n else 1.0
+        feat_scale = (np.abs(np.nanmean(problem.features[self.feats_ok], axis=0)) if self.calibrate
+                      else np.ones(3))
+        src = self.src
+        mean_stride = np.bincount(src, problem.stride_length_m, n_src) / np.maximum(np.bincount(src, minlength=n_src), 1)
+        self.scale_m = np.concatenate([feat_scale, np.full(nb, 0.5 * fusion.gyro_bias_knot_s ** 2 * mean_speed),
+                                       np.full(n_dev, 10.0 * mean_length), mean_stride, [mean_length]])
+        self.step_scale_prior_std = fusion.step_scale_prior_std
+        if self.own_scale and step_model.covariance_matrix is not None:  # the model's own prior on its one parameter
+            self.step_scale_prior_std = float(np.sqrt(step_model.covariance_matrix[0, 0]) / abs(step_model.theta[0]))
+        self.step_scale_prior = StepModelParams(np.ones(1), np.array([[self.step_scale_prior_std ** 2]]), 0.0)
+        self.nonnegative = tuple(RegressionStepLength.theta_names.index(name)
+                                 for name in RegressionStepLength.nonnegative)
+
+    def bias(self, p: np.ndarray) -> SmoothSeries:
+        """The heading-rate bias (rad/s) of the parameters ``p``."""
+        return SmoothSeries(self.bias0.t0_s, self.bias0.knot_s, p[self.layout.bias])
+
+    def measurements(self, p: np.ndarray) -> Measurements:
+        """The step lengths, heading changes, deviation coefficients and stride lengths of the parameters ``p``."""
+        problem, lay = self.problem, self.layout
+        length = (np.where(self.feats_ok, np.nan_to_num(problem.features) @ p[lay.theta], problem.step_length_m)
+                  if self.calibrate else problem.step_length_m * p[lay.step_scale])
+        dtheta = problem.dtheta_rad - self.bias(p)(self.t_step) * self.dt
+        return Measurements(length, dtheta, p[lay.deviation], problem.stride_length_m * p[lay.stride_scales][self.src])
+
+    def update(self, poses: np.ndarray, p: np.ndarray, values: gtsam.Values, use: np.ndarray) -> Update:
+        """The closed-form parameter solve given the poses (each block kept where it is not observable); ``values``
+        and ``use``: the solved graph's poses and fixes, where the stride scales are linearised."""
+        problem, lay, fusion = self.problem, self.layout, self.fusion
+        out, cov = p.copy(), None
+        step_scale_std, scale_std = self.step_scale_prior_std, self.scale_prior_std.copy()
+        if self.estimate_bias:
+            resid = wrap_rad(np.diff(poses[:, 2]) - problem.dtheta_rad)
+            ok = self.known_turn & (self.dt > 0)
+            if ok.sum() >= 2:
+                out[lay.bias] = solve_series(self.bias0, self.t_step[ok], resid[ok], -self.dt[ok],
+                                             problem.dtheta_std_rad[ok], fusion.gyro_bias_rw_radps_per_sqrt_s,
+                                             fusion.gyro_bias_prior_std_radps).values
+        if self.has_mag.any():
+            has_mag = self.has_mag
+            heading = poses[1:, 2][has_mag]
+            y = wrap_rad(problem.mag_rad[has_mag] - heading)
+            inlier = (np.abs(wrap_rad(y - deviation_design(heading) @ p[lay.deviation]))
+                      <= 5.0 * problem.mag_std_rad[has_mag])
+            if inlier.any():
+                out[lay.deviation] = solve_deviation(y[inlier], heading[inlier], problem.mag_std_rad[has_mag][inlier],
+                                                     fusion.mag_deviation_prior_std_rad)
+        if self.calibrate:
+            ok = self.feats_ok
+            out[lay.theta], cov = solve_step_model(along_track(poses)[ok], problem.features[ok],
+                                                   problem.step_length_std_m[ok], self.model_prior, self.nonnegative)
+        if self.scale_steps:  # along = k x length + e, prior k ~ N(1, step_scale_prior_std^2)
+            ok = ~problem.gap
+            k, k_cov = solve_step_model(along_track(poses)[ok], problem.step_length_m[ok, None],
+                                        problem.step_length_std_m[ok], self.step_scale_prior)
+            out[lay.step_scale], step_scale_std = float(k[0]), float(np.sqrt(k_cov[0, 0]))
+        if self.estimate_scales:
+            joint = self.joint_step(poses, values, p, use)
+            if joint is None:  # the joint system is singular: the closed form, conditional on the poses
+                k0, k1 = problem.stride_k[:, 0], problem.stride_k[:, 1]
+                distance = np.linalg.norm(poses[k1, :2] - poses[k0, :2], axis=1)
+                out[lay.stride_scales], scale_std = solve_stride_scales(
+                    distance, problem.stride_length_m, problem.stride_std_m, self.src, self.scale_prior_std,
+                    p[lay.stride_scales], fusion.huber_k)
+            else:
+                theta_new, out[lay.stride_scales], scale_std = joint
+                if self.calibrate and all(theta_new[j] >= 0 for j in self.nonnegative):  # else the bounded closed form
+                    out[lay.theta] = theta_new
+        return Update(out, cov, step_scale_std, scale_std)
+
+    def gnss_scale_info(self, poses: np.ndarray, use: np.ndarray) -> np.ndarray:
+        """Per stride source, the most information (1 / scale variance) GNSS with correlated errors can give its scale:
+        ``D^2 / (2 m sigma^2)`` over the stretch covered by both used fixes and that source's strides."""
+        problem, src = self.problem, self.src
+        n_src = int(src.max()) + 1 if len(src) else 0
+        out = np.zeros(n_src)
+        k_fix = problem.gnss_k[use]
+        if len(k_fix) < 2:
+            return out
+        walked = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(poses[:, :2], axis=0), axis=1))])
+        for q in range(n_src):
+            k = problem.stride_k[src == q]
+            lo, hi = max(int(k_fix.min()), int(k[:, 0].min())), min(int(k_fix.max()) + 1, int(k[:, 1].max()))
+            if hi <= lo:
+                continue
+            distance = walked[hi] - walked[lo]
+            m = max(1.0, (problem.epoch_t_s[hi] - problem.epoch_t_s[lo]) / self.fusion.gnss_correlation_s)
+            out[q] = distance ** 2 / (2.0 * m * self.fusion.gnss_correlated_std_m ** 2)
+        return out
+
+    def joint_step(self, poses: np.ndarray, values: gtsam.Values, p: np.ndarray, use: np.ndarray):
+        """Gauss-Newton step of the stride scales (and the step model, when calibrated) jointly with the poses.
+
+        Given the poses alone the scales barely move (the strides, not GNSS, set the path length: block coordinate
+        descent would crawl), so the poses are eliminated instead: the graph linearised at ``values`` (gtsam's
+        whitened, robust-weighted rows ``A dx = b``) gets one column per parameter (derivatives of the whitened errors
+        by finite differences of ``b``), and the Schur complement of the poses gives the parameters' reduced
+        system ``S dq = r``. With the priors that is the MAP step and the parameters' marginal covariance. Each
+        scale's information from GNSS is capped at :meth:`gnss_scale_info` (the cap taken as a tighter prior with the
+        same posterior mean). Returns ``(theta, scales, scale_std)`` or None when the system is singular.
+        """
+        problem, lay, calibrate = self.problem, self.layout, self.calibrate
+        src, scale_prior_std = self.src, self.scale_prior_std
+        n_src = len(scale_prior_std)
+        meas = self.measurements(p)
+        n_pose = 3 * values.size()  # all keys are Pose2, in key order: pose k -> columns 3k..3k+2
+
+        def jacobian(step_len: np.ndarray, stride_len: np.ndarray):
+            graph, rows = build_graph(problem, poses, meas._replace(step_length_m=step_len, stride_length_m=stride_len),
+                                      use, self.absolute, gnss_factor=self.fusion.gnss_factor,
+                                      huber_k=self.fusion.huber_k)
+            m = np.asarray(graph.linearize(values).sparseJacobian_())
+            return (m[0].astype(int) - 1, m[1].astype(int) - 1, m[2]), rows
+
+        (rows, cols, vals), blocks = jacobian(meas.step_length_m, meas.stride_length_m)
+        n_rows = int(rows.max()) + 1
+        is_b = cols == n_pose
+
+        def b_of(r: np.ndarray, c: np.ndarray, v: np.ndarray) -> np.ndarray:
+            return np.bincount(r[c == n_pose], v[c == n_pose], n_rows)[:n_rows]
+
+        b0 = b_of(rows, cols, vals)
+        if n_rows != blocks["gnss"].stop:
+            return None  # not the row layout of build_graph
+        step_rows = np.arange(n_rows)[blocks["steps"]]
+        stride_rows = np.arange(n_rows)[blocks["strides"]]
+        columns = []
+        h = 1e-3
+        if calibrate:  # d(whitened error)/d(step length), then the chain rule through length = features . theta
+            d_len = -(b_of(*jacobian(meas.step_length_m + h * self.feats_ok, meas.stride_length_m)[0]) - b0) / h
+            design = np.where(self.feats_ok[:, None], np.nan_to_num(problem.features), 0.0)
+            for k in range(3):
+                col = np.zeros(n_rows)
+                col[step_rows] = d_len[step_rows] * np.repeat(design[:, k], 3)
+                columns.append(col)
+        d_scale = -(b_of(*jacobian(meas.step_length_m, meas.stride_length_m + h * problem.stride_length_m)[0])
+                    - b0) / h
+        for q in range(n_src):
+            col = np.zeros(n_rows)
+            col[stride_rows[src == q]] = d_scale[stride_rows[src == q]]
+            columns.append(col)
+        a_pp = scipy.sparse.csc_matrix((vals[~is_b], (rows[~is_b], cols[~is_b])), shape=(n_rows, n_pose))
+        j_q = np.column_stack(columns)
+        h_pq = np.asarray(a_pp.T @ j_q)
+        try:
+            lu = scipy.sparse.linalg.splu(scipy.sparse.csc_matrix(a_pp.T @ a_pp))
+            x = lu.solve(np.column_stack([h_pq, a_pp.T @ b0]))
+        except RuntimeError:
+            return None
+        if not np.isfinite(x).all():
+            return None
+        s_red = j_q.T @ j_q - h_pq.T @ x[:, :-1]
+        r_red = j_q.T @ b0 - h_pq.T @ x[:, -1]
+        n_th = 3 if calibrate else 0
+        q_now = np.concatenate([p[lay.theta] if calibrate else np.zeros(0), p[lay.stride_scales]])
+        q_prior = np.concatenate([self.model_prior.theta if calibrate else np.zeros(0), np.ones(n_src)])
+        prior = np.zeros((n_th + n_src, n_th + n_src))
+        if calibrate:
+            prior[:3, :3] = np.linalg.inv(self.model_prior.covariance)
+        info_prior = 1.0 / np.square(scale_prior_std)
+        info_cap = self.gnss_scale_info(poses, use)
+        try:
+            prior[n_th:, n_th:] = np.diag(info_prior)
+            cov = np.linalg.inv(s_red + prior)
+            info_white = np.maximum(1.0 / np.diag(cov)[n_th:] - info_prior, 0.0)
+            capped = info_white > info_cap
+            # the capped posterior mean = the white-noise one with a prior of info_prior * info_white / info_cap
+            prior[n_th:, n_th:] = np.diag(np.where(capped, info_prior * info_white / np.maximum(info_cap, 1e-12),
+                                                   info_prior))
+            step = np.linalg.solve(s_red + prior, r_red - prior @ (q_now - q_prior))
+        except np.linalg.LinAlgError:
+            return None
+        q_new = q_now + step
+        std = 1.0 / np.sqrt(np.minimum(info_white, info_cap) + info_prior)
+        return (q_new[:3] if calibrate else None), q_new[n_th:], std
