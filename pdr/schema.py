@@ -14,6 +14,11 @@ from pdr.errors import InputError
 
 # trajectory.csv: the start pose, then one row per step
 TRAJECTORY_COLUMNS = ("t_s", "e_m", "n_m", "heading_rad", "e_std_m", "n_std_m")
+# the step detection's table (pdr.pipelines.steps.detect_steps): contacts and their signals, before step lengths
+DETECTED_STEPS_COLUMNS = (
+    "t_s", "bout_id", "step_duration_s", "step_freq_hz", "step_freq_fft_hz", "acc_var_m2ps4", "slope_rad",
+    "heading_rad", "heading_change_rad", "heading_change_std_rad", "mag_heading_rad", "mag_heading_std_rad",
+)
 # steps.csv
 STEPS_COLUMNS = ("step_id", "t_s", "step_length_m", "step_length_std_m", "step_freq_hz", "heading_rad", "source")
 # strides.csv, and the first columns of every stride source's table (foot IMU, leg camera)

@@ -15,7 +15,8 @@ from pdr.cli.main import main
 from pdr.constants import GRAVITY_MPS2
 from pdr.errors import InputError, collect_warnings
 from pdr.io.recording import Recording, save_recording
-from pdr.pipelines.steps import STEPS_COLUMNS, detect_steps, make_detector
+from pdr.pipelines.steps import detect_steps, make_detector
+from pdr.schema import DETECTED_STEPS_COLUMNS
 from pdr.sim import simulate
 from pdr.steps import PeakStepDetection, WaveletStepDetection
 from pdr.steps.features import fft_frequency, spacing_frequency, step_durations, step_variance
@@ -286,7 +287,7 @@ def test_pipeline_columns_and_no_walking():
     imu, _ = walk_imu(walk_s=0.0, rest_before_s=20.0, rest_after_s=0.0)
     with warns(match="no walking"):
         table = detect_steps(rec_of(imu), {})
-    assert list(table.columns) == STEPS_COLUMNS and len(table) == 0
+    assert tuple(table.columns) == DETECTED_STEPS_COLUMNS and len(table) == 0
 
 
 def test_pipeline_gap_of_minutes_and_low_rate():
@@ -308,7 +309,7 @@ def test_pipeline_one_step_and_bad_config():
     imu, _ = walk_imu(walk_s=0.6, step_hz=1.8)
     with collect_warnings():
         table = detect_steps(rec_of(imu), {})
-    assert list(table.columns) == STEPS_COLUMNS and len(table) <= 1
+    assert tuple(table.columns) == DETECTED_STEPS_COLUMNS and len(table) <= 1
     with pytest.raises(InputError, match="unknown parameter"):
         detect_steps(rec_of(imu), {"steps": {"level_typo": 3}})
     with pytest.raises(InputError, match="method"):
@@ -318,7 +319,7 @@ def test_pipeline_one_step_and_bad_config():
 def test_pipeline_peak_method():
     imu, truth = walk_imu(seed=9)
     table = detect_steps(rec_of(imu), {"steps": {"method": "peak"}})
-    assert list(table.columns) == STEPS_COLUMNS and abs(len(table) - len(truth)) <= 3
+    assert tuple(table.columns) == DETECTED_STEPS_COLUMNS and abs(len(table) - len(truth)) <= 3
 
 
 # --- CLI -------------------------------------------------------------------------------------------------------
@@ -329,7 +330,7 @@ def test_cli_steps_smoke(tmp_path, capsys):
     out = tmp_path / "steps.csv"
     assert main(["steps", str(rec), "-o", str(out)]) == 0
     table = pd.read_csv(out)
-    assert list(table.columns) == STEPS_COLUMNS
+    assert tuple(table.columns) == DETECTED_STEPS_COLUMNS
     assert abs(len(table) - len(truth)) <= 2
     assert f"{len(table)} steps" in capsys.readouterr().out
 

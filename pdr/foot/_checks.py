@@ -7,19 +7,14 @@ import pandas as pd
 
 from pdr.errors import InputError, warn
 from pdr.io.recording import ACC_COLUMNS, GYR_COLUMNS, check_time
+from pdr.schema import require_table
 
 MIN_SAMPLES = 20
 
 
 def foot_imu_arrays(imu: pd.DataFrame, what: str = "foot IMU") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(t_s, acc_mps2 (N,3), gyr_radps (N,3))`` of a canonical IMU table; InputError when it cannot be a foot IMU."""
-    if not isinstance(imu, pd.DataFrame):
-        raise InputError(f"{what}: expected a pandas DataFrame with t_s, acc_*_mps2, gyr_*_radps, "
-                         f"found {type(imu).__name__}")
-    missing = [c for c in ("t_s", *ACC_COLUMNS, *GYR_COLUMNS) if c not in imu.columns]
-    if missing:
-        raise InputError(f"{what}: expected columns t_s, acc_*_mps2 and gyr_*_radps (a foot IMU needs the gyroscope), "
-                         f"missing {', '.join(missing)}")
+    require_table(imu, ("t_s", *ACC_COLUMNS, *GYR_COLUMNS), f"{what} (accelerometer and gyroscope)")
     t = imu["t_s"].to_numpy(dtype=float)
     check_time(t, what, min_rows=2)
     acc = imu[list(ACC_COLUMNS)].to_numpy(dtype=float)

@@ -8,19 +8,16 @@ from pdr.errors import InputError, warn
 from pdr.heading import AttitudeStepHeading
 from pdr.io.recording import TRUNK_PLACEMENTS, Recording
 from pdr.pipelines.not_walking import min_step_rate_hz
+from pdr.schema import DETECTED_STEPS_COLUMNS
 from pdr.signals import ImuSignals
 from pdr.steps import PeakStepDetection, WaveletStepDetection, acc_norm_signal, step_features
 
-STEPS_COLUMNS = [
-    "t_s", "bout_id", "step_duration_s", "step_freq_hz", "step_freq_fft_hz", "acc_var_m2ps4", "slope_rad",
-    "heading_rad", "heading_change_rad", "heading_change_std_rad", "mag_heading_rad", "mag_heading_std_rad",
-]
 DETECTORS = {"wavelet": WaveletStepDetection, "peak": PeakStepDetection}
 LOW_RATE_HZ = 25.0  # below this, contact times are coarse (1/rate) and impacts are smoothed away
 
 
 def empty_steps_table() -> pd.DataFrame:
-    return pd.DataFrame({c: pd.Series(dtype=int if c == "bout_id" else float) for c in STEPS_COLUMNS})
+    return pd.DataFrame({c: pd.Series(dtype=int if c == "bout_id" else float) for c in DETECTED_STEPS_COLUMNS})
 
 
 EVERY_STEP_PLACEMENTS = (*TRUNK_PLACEMENTS, "head")  # sensors that see every step: the gait period is never a stride

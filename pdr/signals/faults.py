@@ -29,6 +29,7 @@ from pdr.base import Algorithm
 from pdr.constants import GRAVITY_MPS2
 from pdr.errors import InputError
 from pdr.io.recording import ACC_COLUMNS, GYR_COLUMNS, MAG_COLUMNS, check_time
+from pdr.schema import require_table
 from pdr.signals.attitude import gravity_direction_lowpass
 from pdr.signals.resample import moving_average, runs
 
@@ -174,9 +175,7 @@ class SensorFaultDetection(Algorithm):
     def detect(self, imu: pd.DataFrame, gnss: pd.DataFrame | None = None) -> "SensorFaultDetection":
         """``imu``: a canonical IMU table; ``gnss``: fixes in the local frame (``t_s, e_m, n_m``, optional
         ``h_acc_m``; NaN positions are invalid fixes) or None."""
-        missing = [c for c in ("t_s", *ACC_COLUMNS) if c not in imu.columns]
-        if missing:
-            raise InputError(f"imu: expected columns t_s, {', '.join(ACC_COLUMNS)}, found {', '.join(map(str, imu.columns))}")
+        require_table(imu, ("t_s", *ACC_COLUMNS), "imu")
         t = imu["t_s"].to_numpy(float)
         check_time(t, "imu", min_rows=2)
         rows: list[dict] = []

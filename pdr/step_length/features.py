@@ -25,6 +25,7 @@ from scipy.signal import butter, sosfiltfilt
 from pdr.constants import GRAVITY_MPS2
 from pdr.errors import InputError, warn
 from pdr.io.recording import ACC_COLUMNS, Recording, check_time
+from pdr.schema import require_table
 
 SIGNAL_FEATURES = ("acc_range_mps2", "acc_abs_mean_mps2", "vertical_excursion_m")
 DEFAULT_STEP_S = 1.0 / 1.8  # duration assumed for a lone step (typical cadence 108 steps/min)
@@ -58,9 +59,7 @@ def vertical_acceleration(imu: pd.DataFrame) -> tuple[np.ndarray, np.ndarray, fl
     The IMU is linearly resampled at its median rate; the vertical is the unit vector of the low-passed
     (``GRAVITY_LOWPASS_HZ``, zero phase) specific force.
     """
-    missing = [c for c in ("t_s", *ACC_COLUMNS) if c not in imu.columns]
-    if missing:
-        raise InputError(f"imu: expected columns t_s, {', '.join(ACC_COLUMNS)}, found {', '.join(map(str, imu.columns))}")
+    require_table(imu, ("t_s", *ACC_COLUMNS), "imu")
     t = imu["t_s"].to_numpy(float)
     check_time(t, "imu", min_rows=2)
     acc = imu[list(ACC_COLUMNS)].to_numpy(float)
@@ -139,8 +138,7 @@ def step_signal_features(imu: pd.DataFrame, t_s: np.ndarray, bout_id: np.ndarray
 
 def with_signal_features(steps: pd.DataFrame, rec: Recording | pd.DataFrame) -> pd.DataFrame:
     """A copy of ``steps`` with the columns of :data:`SIGNAL_FEATURES` added from ``rec`` (a Recording or an IMU table)."""
-    if "t_s" not in steps.columns:
-        raise InputError(f"steps: expected a t_s column, found {', '.join(map(str, steps.columns)) or 'no columns'}")
+    require_table(steps, ("t_s",), "steps")
     imu = rec.imu if isinstance(rec, Recording) else rec
     bout = steps["bout_id"].to_numpy() if "bout_id" in steps.columns else None
     feats = step_signal_features(imu, steps["t_s"].to_numpy(float), bout)
