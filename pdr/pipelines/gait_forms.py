@@ -61,17 +61,17 @@ def recording_cycles(rec: Recording, config: dict | None = None, *, steps: pd.Da
         tables = [foot_cycles(imu, foot) for foot, imu in sorted(feet.items())]
         cycles = pd.concat([t for t in tables if len(t)] or [empty_cycles(foot_layout())], ignore_index=True)
     else:
+        signals = signals or ImuSignals(rec.imu)
         if steps is None:
             steps = detect_steps(rec, config)
             if len(steps):
                 model = model_from_config(config)
-                model.estimate(model.prepare(steps, rec), subject=rec.subject)
+                model.estimate(model.prepare(steps, rec, signals), subject=rec.subject)
                 steps = steps.assign(step_length_m=model.step_length_m_)
         if len(steps) < 3:
             warn(f"{rec.id}: fewer than three steps, no gait cycle")
             cycles = empty_cycles(imu_layout())
         else:
-            signals = signals or ImuSignals(rec.imu)
             cycles = imu_cycles(signals.uniform, signals.attitude, steps, what=f"{rec.id}: gait cycles")
     cycles.insert(0, "recording", rec.id)
     cycles["leg_length_m"] = _leg_length_m(rec)

@@ -299,7 +299,7 @@ class Pipeline(Algorithm):
             steps = drop_not_walking(steps, not_walking)
             lap("steps_s")
 
-            model.estimate(model.prepare(steps, rec), subject=rec.subject)
+            model.estimate(model.prepare(steps, rec, signals), subject=rec.subject)
             steps["step_length_m"] = np.asarray(model.step_length_m_, float)
             steps["step_length_std_m"] = np.asarray(model.step_length_std_m_, float)
             gait_forms_info = None

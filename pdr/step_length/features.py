@@ -3,7 +3,7 @@
 The steps table (CONTRACT.md) carries ``step_freq_hz`` and ``acc_var_m2ps4``, enough for the regression model.
 Weinberg needs the range of the vertical acceleration over the step, Kim the mean absolute dynamic acceleration,
 and Zijlstra's inverted pendulum the vertical excursion of the centre of mass. These are computed here from the
-recording's main IMU and the step instants, orientation-free: the vertical is the direction of the low-passed
+recording's main IMU (on its uniform grid, :func:`pdr.signals.uniform_imu`) and the step instants, orientation-free: the vertical is the direction of the low-passed
 specific force (gravity), so a waist belt, a phone in a pocket or a hand all work.
 
 A step (row ``k``) is the interval from the previous foot contact of its bout to its own contact ``t_s[k]``; the
@@ -24,8 +24,9 @@ from scipy.signal import butter, sosfiltfilt
 
 from pdr.constants import GRAVITY_MPS2
 from pdr.errors import InputError, warn
-from pdr.io.recording import ACC_COLUMNS, Recording, check_time
+from pdr.io.recording import Recording
 from pdr.schema import require_table
+from pdr.signals import ImuSignals, UniformImu, uniform_imu
 
 SIGNAL_FEATURES = ("acc_range_mps2", "acc_abs_mean_mps2", "vertical_excursion_m")
 DEFAULT_STEP_S = 1.0 / 1.8  # duration assumed for a lone step (typical cadence 108 steps/min)
@@ -53,30 +54,22 @@ def step_intervals(t_s: np.ndarray, bout_id: np.ndarray | None = None) -> tuple[
     return start, t_s.copy()
 
 
-def vertical_acceleration(imu: pd.DataFrame) -> tuple[np.ndarray, np.ndarray, float]:
-    """Vertical dynamic acceleration (m/s², up positive, gravity removed) on a uniform grid: ``(t_s, a_v, rate_hz)``.
-
-    The IMU is linearly resampled at its median rate; the vertical is the unit vector of the low-passed
+def vertical_acceleration(u: UniformImu) -> tuple[np.ndarray, np.ndarray, float]:
+    """Vertical dynamic acceleration (m/s², up positive, gravity removed) on the IMU's uniform grid
+    (:func:`pdr.signals.uniform_imu`): ``(t_s, a_v, rate_hz)``. The vertical is the unit vector of the low-passed
     (``GRAVITY_LOWPASS_HZ``, zero phase) specific force.
     """
-    require_table(imu, ("t_s", *ACC_COLUMNS), "imu")
-    t = imu["t_s"].to_numpy(float)
-    check_time(t, "imu", min_rows=2)
-    acc = imu[list(ACC_COLUMNS)].to_numpy(float)
-    if not np.isfinite(acc).all():
-        raise InputError("imu: expected finite acceleration, found NaN or inf")
-    rate = float(1.0 / np.median(np.diff(t)))
+    rate = u.rate_hz
     if rate < MIN_RATE_HZ:
         raise InputError(f"imu: expected a sampling rate of at least {MIN_RATE_HZ:g} Hz for step features, found {rate:.1f} Hz")
-    grid = t[0] + np.arange(int(np.floor((t[-1] - t[0]) * rate)) + 1) / rate
-    a = np.column_stack([np.interp(grid, t, acc[:, i]) for i in range(3)])
-    if len(grid) > 12:
-        pad = min(len(grid) - 1, int(3 * rate / GRAVITY_LOWPASS_HZ))
+    a = u.acc_mps2
+    if len(a) > 12:
+        pad = min(len(a) - 1, int(3 * rate / GRAVITY_LOWPASS_HZ))
         g = sosfiltfilt(butter(2, GRAVITY_LOWPASS_HZ, "lowpass", fs=rate, output="sos"), a, axis=0, padlen=pad)
     else:  # too short for the filter: one mean gravity vector
         g = np.broadcast_to(a.mean(axis=0), a.shape)
     up = g / np.linalg.norm(g, axis=1, keepdims=True)
-    return grid, np.einsum("ij,ij->i", a, up) - GRAVITY_MPS2, rate
+    return u.t_s, np.einsum("ij,ij->i", a, up) - GRAVITY_MPS2, rate
 
 
 def vertical_excursion_m(acc_vertical_mps2: np.ndarray, rate_hz: float, t0_s: float,
@@ -107,10 +100,11 @@ def vertical_excursion_m(acc_vertical_mps2: np.ndarray, rate_hz: float, t0_s: fl
     return out
 
 
-def step_signal_features(imu: pd.DataFrame, t_s: np.ndarray, bout_id: np.ndarray | None = None) -> pd.DataFrame:
+def step_signal_features(imu: pd.DataFrame | UniformImu, t_s: np.ndarray,
+                         bout_id: np.ndarray | None = None) -> pd.DataFrame:
     """``acc_range_mps2`` (max - min vertical acceleration), ``acc_abs_mean_mps2`` (mean |vertical dynamic
     acceleration|) and ``vertical_excursion_m`` for the steps ending at ``t_s`` (one row each, NaN where the step
-    lies outside the IMU record)."""
+    lies outside the IMU record). ``imu``: an IMU table or its uniform resampling."""
     t_s = np.asarray(t_s, float)
     if len(t_s) and not np.isfinite(t_s).all():
         raise InputError("steps: expected finite t_s, found NaN or inf")
@@ -119,7 +113,7 @@ def step_signal_features(imu: pd.DataFrame, t_s: np.ndarray, bout_id: np.ndarray
     empty = pd.DataFrame({c: np.full(len(t_s), np.nan) for c in SIGNAL_FEATURES})
     if len(t_s) == 0:
         return empty
-    grid, av, rate = vertical_acceleration(imu)
+    grid, av, rate = vertical_acceleration(imu if isinstance(imu, UniformImu) else uniform_imu(imu))
     start, end = step_intervals(t_s, bout_id)
     exc = vertical_excursion_m(av, rate, grid[0], start, end)
     i0 = np.searchsorted(grid, start, side="left")
@@ -136,12 +130,14 @@ def step_signal_features(imu: pd.DataFrame, t_s: np.ndarray, bout_id: np.ndarray
     return pd.DataFrame({"acc_range_mps2": rng, "acc_abs_mean_mps2": absmean, "vertical_excursion_m": exc})
 
 
-def with_signal_features(steps: pd.DataFrame, rec: Recording | pd.DataFrame) -> pd.DataFrame:
-    """A copy of ``steps`` with the columns of :data:`SIGNAL_FEATURES` added from ``rec`` (a Recording or an IMU table)."""
+def with_signal_features(steps: pd.DataFrame, rec: Recording | pd.DataFrame,
+                         signals: ImuSignals | None = None) -> pd.DataFrame:
+    """A copy of ``steps`` with the columns of :data:`SIGNAL_FEATURES` added from ``rec`` (a Recording or an IMU
+    table); ``signals``: its main IMU's shared signals (default: computed here)."""
     require_table(steps, ("t_s",), "steps")
     imu = rec.imu if isinstance(rec, Recording) else rec
     bout = steps["bout_id"].to_numpy() if "bout_id" in steps.columns else None
-    feats = step_signal_features(imu, steps["t_s"].to_numpy(float), bout)
+    feats = step_signal_features(imu if signals is None else signals.uniform, steps["t_s"].to_numpy(float), bout)
     out = steps.copy()
     for col in SIGNAL_FEATURES:
         out[col] = feats[col].to_numpy()

@@ -28,6 +28,7 @@ from pdr.base import Algorithm
 from pdr.constants import REFERENCE_CADENCE_HZ
 from pdr.errors import InputError, warn
 from pdr.io.recording import Recording
+from pdr.signals import ImuSignals
 from pdr.step_length.features import with_signal_features
 
 MAX_STEP_M = 2.0  # a longer "step" is a model blow-up (a sprint step is ~1.5 m): clipped, with a warning
@@ -93,11 +94,12 @@ class StepLengthModel(Algorithm):
                 raise InputError(f"{type(self).__name__}: expected a symmetric positive semi-definite covariance, found {cov.tolist()}")
 
     # ------------------------------------------------------------------ features
-    def prepare(self, steps: pd.DataFrame, rec: Recording | pd.DataFrame) -> pd.DataFrame:
-        """``steps`` with the signal features this model needs added from the recording (a no-op when present)."""
+    def prepare(self, steps: pd.DataFrame, rec: Recording | pd.DataFrame, signals: ImuSignals | None = None) -> pd.DataFrame:
+        """``steps`` with the signal features this model needs added from the recording (a no-op when present);
+        ``signals``: its main IMU's shared signals (default: computed here)."""
         if all(c in steps.columns for c in self.required_columns):
             return steps
-        return with_signal_features(steps, rec)
+        return with_signal_features(steps, rec, signals)
 
     def _features(self, steps: pd.DataFrame) -> dict[str, np.ndarray]:
         if not isinstance(steps, pd.DataFrame):
