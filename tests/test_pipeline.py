@@ -13,6 +13,7 @@ import pandas as pd
 import pytest
 
 import pdr
+from pdr.config import load_config
 from pdr.errors import InputError, collect_warnings
 from pdr.fusion import EkfFusion
 from pdr.io.recording import Recording, save_recording
@@ -56,8 +57,19 @@ def test_python_api_gives_what_pdr_run_writes(walk, tmp_path):
     np.testing.assert_allclose(steps["step_length_m"], res.steps_["step_length_m"], atol=1e-4)
     assert res.strides_ is None and list(res.bouts_["bout_id"]) == list(pd.read_csv(tmp_path / "out" / "bouts.csv")["bout_id"])
     run_json = json.loads((tmp_path / "out" / "run.json").read_text())
-    # run.json records the pipeline's parameters (floats at the 9 significant digits of every JSON output)
-    assert run_json["pipeline"] == json.loads(dumps_json(pdr.Pipeline.from_config(None).get_params()))
+    assert run_json["pipeline"] == pdr.Pipeline.from_config(None).get_params()  # run.json records the parameters
+
+
+def test_run_json_rebuilds_the_pipeline_exactly(walk, tmp_path):
+    config = tmp_path / "config.toml"  # floats that 9 significant digits would change
+    config.write_text("[fusion]\nhuber_k = 1.3450000000000002\nlateral_std_m = 0.021234567891234\n"
+                      "[steps]\nmethod = \"peak\"\n")
+    with collect_warnings():
+        run_recording(walk, tmp_path / "out", config_path=config)
+    params = json.loads((tmp_path / "out" / "run.json").read_text())["pipeline"]
+    assert params["fusion"]["huber_k"] == 1.3450000000000002 and float(dumps_json(1.3450000000000002)) == 1.345
+    built = pdr.Pipeline.from_config(load_config(config))
+    assert pdr.Pipeline(**params).get_params() == built.get_params()
 
 
 def test_params_are_json_and_rebuild_the_same_pipeline(walk):

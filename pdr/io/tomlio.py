@@ -1,5 +1,5 @@
-"""Data-only readers of TOML (tomllib) and JSON files, and a small writer for the flat tables pdr writes (meta.toml,
-camera.toml)."""
+"""Data-only readers of TOML (tomllib) and JSON files, the plain JSON values every JSON file of pdr is written from,
+and a small writer for the flat tables pdr writes (meta.toml, camera.toml)."""
 
 from __future__ import annotations
 
@@ -8,6 +8,8 @@ import math
 import sys
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from pdr.errors import InputError
 
@@ -39,6 +41,34 @@ def read_json(path: str | Path, *, what: str, missing: str) -> Any:
         return json.loads(path.read_text(encoding="utf-8"))
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise InputError(f"{what}: expected JSON, found unreadable content ({exc})") from None
+
+
+def jsonable(value: Any, float_digits: int | None = 9) -> Any:
+    """Plain JSON values: numpy scalars and arrays converted, NaN/inf -> null, floats to ``float_digits``
+    significant digits (None: exactly, as Python's shortest repr that reads back to the same float)."""
+    if isinstance(value, dict):
+        return {str(k): jsonable(v, float_digits) for k, v in value.items()}
+    if isinstance(value, (list, tuple, np.ndarray)):
+        return [jsonable(v, float_digits) for v in value]
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        value = float(value)
+        if not math.isfinite(value):
+            return None
+        return value if float_digits is None else float(f"{value:.{float_digits}g}")
+    if isinstance(value, Path):
+        return str(value)
+    if value is None or isinstance(value, str):
+        return value
+    raise TypeError(f"cannot write {type(value).__name__} to JSON")
+
+
+def dumps_json(obj: Any, float_digits: int | None = 9) -> str:
+    """The JSON text of ``obj`` (:func:`jsonable`), sorted keys, 2-space indent (deterministic)."""
+    return json.dumps(jsonable(obj, float_digits), indent=2, sort_keys=True, allow_nan=False) + "\n"
 
 
 def _value(v: Any) -> str:

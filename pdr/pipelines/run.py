@@ -127,7 +127,7 @@ def run_recording(rec: Path, out: Path, *, config_path=None, model_path=None, us
                        title=f"{recording.id}: {len(steps)} steps, {summary['distance_m']:.1f} m ({method} fusion)")
             write_bouts_plot(tmp / "bouts.png", pipeline.bouts_, pipeline.bout_steps_,
                              title=f"{recording.id}: walking bouts")
-        write_json(tmp / "run.json", provenance)
+        write_json(tmp / "run.json", provenance, float_digits=None)  # exact: Pipeline(**pipeline) rebuilds it
         timings["write_s"] = time.perf_counter() - clock
         summary["timings_s"] = {**timings, "total_s": sum(timings.values())}
         write_json(tmp / "summary.json", summary)

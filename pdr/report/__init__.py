@@ -1,11 +1,10 @@
 """Outputs of ``pdr run``: CSV tables, summary/provenance JSON, GeoJSON, TUM, GPX and the PNG plots."""
 
+from pdr.io.tomlio import dumps_json, jsonable
 from pdr.report.plot import write_bouts_plot, write_plot
 from pdr.report.writers import (
-    dumps_json,
     geojson_object,
     gpx_text,
-    jsonable,
     steps_table,
     trajectory_table,
     tum_text,

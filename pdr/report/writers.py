@@ -15,7 +15,6 @@ Frames: east-north-up local frame of the recording's ``[geo]`` origin, heading c
 from __future__ import annotations
 
 import json
-import math
 import xml.etree.ElementTree as ET
 from datetime import datetime, timezone
 from pathlib import Path
@@ -28,6 +27,7 @@ from scipy.spatial.transform import Rotation
 from pdr import __version__
 from pdr.geo import en_to_latlon
 from pdr.io.atomic import write_csv, write_text
+from pdr.io.tomlio import dumps_json
 from pdr.schema import BOUT_COLUMNS, STEPS_COLUMNS, STRIDE_COLUMNS, TRAJECTORY_COLUMNS, require_table
 
 CSV_FLOAT_FORMAT = "%.15g"  # prints the rounded values exactly (15 significant digits round-trip a decimal)
@@ -94,33 +94,10 @@ def write_bouts_csv(path: Path, bouts: pd.DataFrame) -> None:
     _write_table(path, table)
 
 
-def jsonable(value: Any) -> Any:
-    """Plain JSON values: numpy scalars and arrays converted, floats to 9 significant digits, NaN/inf -> null."""
-    if isinstance(value, dict):
-        return {str(k): jsonable(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple, np.ndarray)):
-        return [jsonable(v) for v in value]
-    if isinstance(value, (bool, np.bool_)):
-        return bool(value)
-    if isinstance(value, (int, np.integer)):
-        return int(value)
-    if isinstance(value, (float, np.floating)):
-        value = float(value)
-        return float(f"{value:.9g}") if math.isfinite(value) else None
-    if isinstance(value, Path):
-        return str(value)
-    if value is None or isinstance(value, str):
-        return value
-    raise TypeError(f"cannot write {type(value).__name__} to JSON")
-
-
-def dumps_json(obj: Any) -> str:
-    return json.dumps(jsonable(obj), indent=2, sort_keys=True, allow_nan=False) + "\n"
-
-
-def write_json(path: Path, obj: Any) -> None:
-    """A JSON object with sorted keys, 2-space indent, floats at 9 significant digits (deterministic)."""
-    write_text(path, dumps_json(obj))
+def write_json(path: Path, obj: Any, float_digits: int | None = 9) -> None:
+    """A JSON object with sorted keys, 2-space indent, floats at ``float_digits`` significant digits (None: exactly;
+    :func:`pdr.io.tomlio.jsonable`)."""
+    write_text(path, dumps_json(obj, float_digits))
 
 
 def yaw_to_quaternion_xyzw(yaw_rad: np.ndarray) -> np.ndarray:

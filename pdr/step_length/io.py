@@ -18,33 +18,16 @@ Example
 from __future__ import annotations
 
 import json
-import math
 from pathlib import Path
 from typing import Any
-
-import numpy as np
 
 from pdr import __version__
 from pdr.errors import InputError
 from pdr.io.atomic import write_text
-from pdr.io.tomlio import read_json
+from pdr.io.tomlio import jsonable, read_json
 from pdr.step_length.models import MODELS, RegressionStepLength, StepLengthModel
 
 MODEL_VERSION = 1
-
-
-def _jsonable(value: Any) -> Any:
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, (np.floating, np.integer)):
-        return value.item()
-    if isinstance(value, dict):
-        return {str(k): _jsonable(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_jsonable(v) for v in value]
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
 
 
 def model_to_dict(model: StepLengthModel, **info: Any) -> dict[str, Any]:
@@ -52,8 +35,8 @@ def model_to_dict(model: StepLengthModel, **info: Any) -> dict[str, Any]:
     if not isinstance(model, StepLengthModel):
         raise InputError(f"save_model: expected a step-length model, found {type(model).__name__}")
     model._check_params()
-    return {"pdr_model_version": MODEL_VERSION, "model": model.name, "params": _jsonable(model.get_params()),
-            "info": _jsonable({"pdr_version": __version__, **info})}
+    return {"pdr_model_version": MODEL_VERSION, "model": model.name, "params": jsonable(model.get_params(), float_digits=None),
+            "info": jsonable({"pdr_version": __version__, **info}, float_digits=None)}
 
 
 def save_model(model: StepLengthModel, path: str | Path, **info: Any) -> Path:
