@@ -278,7 +278,7 @@ def test_bad_input_is_reported(templates, switch_walk):
         est.estimate(sim.frames, sim.observations.assign(point_id=sim.observations.point_id + 10**9), sim.points, **kw)
     with pytest.raises(InputError, match="strictly increasing"):
         est.estimate(sim.frames.iloc[::-1], sim.observations, sim.points, **kw)
-    with pytest.raises(InputError, match="expected columns u_px"):
+    with pytest.raises(InputError, match="missing u_px"):
         est.estimate(sim.frames, sim.observations.drop(columns="u_px"), sim.points, **kw)
     with pytest.raises(InputError, match="frame indices"):
         est.estimate(sim.frames.iloc[:10], sim.observations, sim.points, **kw)

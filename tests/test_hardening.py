@@ -143,10 +143,10 @@ def test_a_run_that_fails_while_writing_leaves_the_previous_output(tmp_path, cap
     before = {p.name: p.read_bytes() for p in out.iterdir()}
     import pdr.pipelines.run as run_module
 
-    def broken(path, obj):
+    def broken(path, obj, **kw):
         if Path(path).name == "summary.json":  # the last file written
             raise OSError("disk full")
-        return write_json(path, obj)
+        return write_json(path, obj, **kw)
 
     write_json = run_module.write_json
     monkeypatch.setattr(run_module, "write_json", broken)

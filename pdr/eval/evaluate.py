@@ -28,6 +28,7 @@ from pdr.eval.metrics import (
 )
 from pdr.io.recording import check_time, load_recording, read_csv
 from pdr.io.tomlio import read_json
+from pdr.schema import require_table
 
 STEP_F1_TOLERANCE_S = 0.25
 SIGNIFICANT_DIGITS = 7  # metrics are printed to 7 significant digits (far beyond their accuracy)
@@ -36,9 +37,7 @@ STRIDE_MATCH_MIN_OVERLAP = 0.5  # share of the longer stride covered by both
 
 def _read_out_table(out: Path, name: str, columns: tuple[str, ...]) -> pd.DataFrame:
     df = read_csv(out / name, f"{out / name}")
-    missing = [c for c in columns if c not in df.columns]
-    if missing:
-        raise InputError(f"{out / name}: expected columns {', '.join(columns)}, found {', '.join(df.columns)}")
+    require_table(df, columns, f"{out / name}")
     for c in columns:
         if not pd.api.types.is_numeric_dtype(df[c]) and c not in ("foot", "source"):
             raise InputError(f"{out / name}: expected numbers in column {c}, found text")

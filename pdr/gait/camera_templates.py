@@ -13,6 +13,7 @@ from pdr.errors import InputError
 from pdr.gait.camera_model import JOINTS, SIDES, TWO_PI
 from pdr.gait.fourier import DEFAULT_ORDER, fourier_coefficients, fourier_derivative, fourier_design_matrix
 from pdr.io.recording import numeric_frame
+from pdr.schema import require_table
 
 # Template parameters (columns of each form's coefficient matrix). rho: path advance per radian of phase.
 PARAMS = ("rho_m_per_rad", "pelvis_f_m", "pelvis_l_m", "pelvis_u_m") + tuple(
@@ -29,17 +30,9 @@ MOCAP_COLUMNS = ["t_s", "e_m", "n_m", "heading_rad", "phase_rad", "phase_rate_ra
     c for j in JOINTS for c in joint_columns(j)]
 
 
-def _check_table(df: pd.DataFrame, columns: list[str], what: str) -> None:
-    if not isinstance(df, pd.DataFrame):
-        raise InputError(f"{what}: expected a DataFrame, found {type(df).__name__}")
-    missing = [c for c in columns if c not in df.columns]
-    if missing:
-        raise InputError(f"{what}: expected columns {', '.join(missing)}, found {', '.join(map(str, df.columns)) or 'none'}")
-
-
 def _numeric(df: pd.DataFrame, columns: list[str], what: str, also: list[str] = ()) -> pd.DataFrame:
     """``df`` with ``columns`` as numbers (:func:`pdr.io.recording.numeric_frame`) and ``also`` present."""
-    _check_table(df, list(columns) + list(also), what)
+    require_table(df, list(columns) + list(also), what)
     return df.assign(**numeric_frame(df[list(columns)], what))
 
 
@@ -137,7 +130,7 @@ class FourierFormTemplates(Algorithm):
     def fit(self, mocap: pd.DataFrame) -> "FourierFormTemplates":
         """Learn the templates from a motion-capture table (``MOCAP_COLUMNS``; several walks may be concatenated,
         told apart by an optional ``walk`` column, each with increasing ``t_s``)."""
-        _check_table(mocap, MOCAP_COLUMNS, "form templates: training table")
+        require_table(mocap, MOCAP_COLUMNS, "form templates: training table")
         walks = mocap["walk"].to_numpy() if "walk" in mocap.columns else np.zeros(len(mocap), int)
         forms: list[str] = []
         for f in mocap["form"].astype(str):

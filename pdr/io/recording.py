@@ -19,6 +19,7 @@ from pdr.constants import GRAVITY_MPS2
 from pdr.errors import InputError
 from pdr.io.atomic import CSV_DIGITS, atomic_dir, write_csv, write_text
 from pdr.io.tomlio import dumps_toml, read_toml
+from pdr.schema import require_table
 
 PLACEMENTS = (
     "waist", "trunk", "pocket", "hand", "bag", "arm", "neck", "head",
@@ -185,9 +186,7 @@ def _check_nan(df: pd.DataFrame, columns: list[str], what: str) -> None:
 
 def validate_imu(df: pd.DataFrame, what: str = "imu.csv") -> pd.DataFrame:
     """Check an IMU table against CONTRACT.md and return it with float columns in canonical order."""
-    missing = [c for c in ("t_s", *ACC_COLUMNS) if c not in df.columns]
-    if missing:
-        raise InputError(f"{what}: expected columns t_s, acc_x_mps2, acc_y_mps2, acc_z_mps2, found {', '.join(map(str, df.columns)) or 'none'}")
+    require_table(df, ("t_s", *ACC_COLUMNS), what)
     for group in (GYR_COLUMNS, MAG_COLUMNS):
         present = [c for c in group if c in df.columns]
         if present and len(present) != 3:

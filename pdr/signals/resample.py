@@ -9,6 +9,7 @@ import pandas as pd
 
 from pdr.errors import InputError, warn
 from pdr.io.recording import ACC_COLUMNS, GYR_COLUMNS, MAG_COLUMNS, check_time
+from pdr.schema import require_table
 
 GAP_FACTOR = 5.0  # an original sample interval longer than this many median intervals is a gap ...
 GAP_MIN_S = 0.2  # ... and at least this long (shorter holes are interpolated: they are well inside one step)
@@ -72,9 +73,7 @@ def uniform_imu(imu: pd.DataFrame, rate_hz: float | None = None) -> UniformImu:
 
     Gaps (original intervals longer than ``max(5 median intervals, 0.2 s)``) are marked invalid with a warning.
     """
-    missing = [c for c in ("t_s", *ACC_COLUMNS) if c not in imu.columns]
-    if missing:
-        raise InputError(f"imu: expected columns t_s, {', '.join(ACC_COLUMNS)}, found {', '.join(map(str, imu.columns))}")
+    require_table(imu, ("t_s", *ACC_COLUMNS), "imu")
     t = imu["t_s"].to_numpy(float)
     check_time(t, "imu", min_rows=2)
     dt = np.diff(t)
