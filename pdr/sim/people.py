@@ -175,10 +175,10 @@ def plan_walk(segments: Sequence[tuple[float, float]], user: GaitUser, body: Bod
     phase = 0.0
     moving: list[tuple[float, float, float]] = []  # (start, end, speed)
 
-    def close(run):
-        nonlocal phase
+    def close(run: list[tuple[float, float, float]], phase: float) -> float:
+        """Plan the bout of the consecutive moving segments ``run`` from gait ``phase``; the phase after it."""
         if not run:
-            return
+            return phase
         tb, te = run[0][0], run[-1][1]
         starts = np.array([r[0] for r in run])
         speeds = np.array([r[2] for r in run])
@@ -205,13 +205,14 @@ def plan_walk(segments: Sequence[tuple[float, float]], user: GaitUser, body: Bod
             lengths[-1] *= GAIT_START_FRACTION
             bouts.append(Bout(np.array(times), phase + 0.5 * np.arange(n + 1), np.array(lengths), np.array(vs)))
             phase += 0.5 * n
+        return phase
 
     for duration, speed in segments:
         if speed > 0:
             moving.append((t, t + duration, float(speed)))
         else:
-            close(moving)
+            phase = close(moving, phase)
             moving = []
         t += duration
-    close(moving)
+    close(moving, phase)
     return bouts
