@@ -376,6 +376,20 @@ def test_sensorlogger_ios_uncalibrated_in_g_and_empty_location(tmp_path):
     assert rec.gnss is None and any("Location.csv: empty file" in m for m in messages)
 
 
+def test_sensorlogger_android_uncalibrated_in_mps2(tmp_path):
+    """An Android export whose only accelerometer file is ``AccelerometerUncalibrated.csv`` (the same columns as every
+    motion file, m/s² with gravity: on Android the same data as ``TotalAcceleration.csv``) is read unscaled."""
+    src = tmp_path / "export"
+    shutil.copytree(HAND / "sensorlogger_android", src)
+    (src / "TotalAcceleration.csv").rename(src / "AccelerometerUncalibrated.csv")
+    for name in ("Accelerometer.csv", "Gravity.csv"):
+        (src / name).unlink()
+    rec = load_recording(_import("sensorlogger", src, tmp_path / "u")[0][0])
+    android = load_recording(_import("sensorlogger", HAND / "sensorlogger_android", tmp_path / "a")[0][0])
+    pd.testing.assert_frame_equal(rec.imu, android.imu)
+    assert 9.0 < _median_acc(rec) < 10.6
+
+
 def test_sensorlogger_ios_clock_origins_aligned(tmp_path):
     paths, messages = _import("sensorlogger", HAND / "sensorlogger_ios_clocks", tmp_path)
     rec = load_recording(paths[0])

@@ -101,3 +101,55 @@ def test_five_hz_recording_follows_the_gnss_and_says_why(tmp_path, capsys):
     assert load_recording(path).sample_rate_hz == pytest.approx(5.0)
     assert main(["validate", str(path)]) == 0  # the CLI prints each warning as one line
     assert "sampling rate 5.0 Hz is below twice the highest cadence (7 Hz)" in capsys.readouterr().err
+
+
+def _sensor_logger_export(rec, folder, epoch_ns: int = 1717236000000000000) -> None:
+    """``rec`` written as Sensor Logger 1.31 on Android writes it (the layout of tests/importers/sensorlogger_android):
+    nanosecond ``time`` and ``seconds_elapsed``, axes in the order z, y, x, six decimals, ``Metadata.csv`` without a
+    final line break."""
+    folder.mkdir(parents=True)
+    t = rec.imu["t_s"].to_numpy()
+
+    def motion(name, cols):
+        table = pd.DataFrame({"time": epoch_ns + np.round(t * 1e9).astype(np.int64), "seconds_elapsed": t,
+                              "z": rec.imu[cols[2]], "y": rec.imu[cols[1]], "x": rec.imu[cols[0]]})
+        table.to_csv(folder / name, index=False, float_format="%.6f", lineterminator="\n")
+
+    motion("TotalAcceleration.csv", ["acc_x_mps2", "acc_y_mps2", "acc_z_mps2"])
+    motion("Gyroscope.csv", ["gyr_x_radps", "gyr_y_radps", "gyr_z_radps"])
+    g = rec.gnss
+    zero = np.zeros(len(g))
+    pd.DataFrame({"time": epoch_ns + np.round(g["t_s"].to_numpy() * 1e9).astype(np.int64),
+                  "seconds_elapsed": g["t_s"], "bearingAccuracy": zero, "speedAccuracy": zero,
+                  "verticalAccuracy": g["h_acc_m"], "horizontalAccuracy": g["h_acc_m"], "speed": zero, "bearing": zero,
+                  "altitude": g["alt_m"], "longitude": g["lon_deg"], "latitude": g["lat_deg"]}).to_csv(
+        folder / "Location.csv", index=False, float_format="%.7f", lineterminator="\n")
+    rate_ms = int(round(1e3 * np.median(np.diff(t))))
+    (folder / "Metadata.csv").write_bytes(
+        b"version,device name,recording epoch time,recording time,recording timezone,platform,appVersion,device id,"
+        b"sensors,sampleRateMs,standardisation\n"
+        + f"3,Pixel 7,{epoch_ns // 10**6},2024-06-01_10-00-00,Europe/Berlin,android,1.31.0,5f2a9c1e,"
+          f"Gyroscope|Location|TotalAcceleration,{rate_ms}|1000|{rate_ms},false".encode())
+
+
+def test_five_hz_sensor_logger_export_follows_the_gnss_and_says_why(tmp_path, capsys):
+    """The issue's case from the user's side: a Sensor Logger export whose motion sensors ran at 5 Hz imports,
+    validates with the rate warning, and runs on the GNSS alone, saying why there are no steps."""
+    sc = _scenario()
+    sc["segment"] = [{"duration_s": 120.0, "speed_mps": 1.3}]
+    rec = simulate(sc, seed=4)
+    block = 20  # 100 Hz -> 5 Hz: the mean of each 0.2 s, as a phone's low-rate sensor delivers it
+    imu = rec.imu.iloc[: len(rec.imu) // block * block]
+    rec.imu = imu.groupby(np.arange(len(imu)) // block).mean().reset_index(drop=True)
+    _sensor_logger_export(rec, tmp_path / "export")
+    assert not (tmp_path / "export" / "Metadata.csv").read_bytes().endswith(b"\n")
+    assert main(["import", "sensorlogger", str(tmp_path / "export"), str(tmp_path / "recs")]) == 0
+    path = capsys.readouterr().out.split()[0]
+    assert main(["validate", path]) == 0
+    assert "sampling rate 5.0 Hz is below twice the highest cadence (7 Hz)" in capsys.readouterr().err
+    assert main(["run", path, "-o", str(tmp_path / "out")]) == 0
+    err = capsys.readouterr().err
+    assert "below twice the highest cadence" in err and "follows the GNSS alone" in err
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["n_steps"] == 0 and summary["gnss"]["used"] > 100
+    assert 0.85 * 1.3 * 120.0 < summary["distance_m"] < 1.3 * 1.3 * 120.0

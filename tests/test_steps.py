@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -359,31 +360,39 @@ def test_oxford_count_regression(position):
 HANDLING_SCENARIO = Path(__file__).resolve().parents[1] / "configs" / "sim" / "phone_pocket_handling.toml"
 
 
-def test_phone_handling_at_the_bout_edges_is_left_out():
+@pytest.mark.parametrize("gyroscope", [False, True])
+def test_phone_handling_at_the_bout_edges_is_left_out(gyroscope):
     """The phone taken out of the pocket before the walk and put back after (the simulator's ``in_pocket_s``): the
-    handling is found where it happened, its maxima are not steps, and the walk's own steps stay."""
+    handling is found where it happened, its maxima are not steps, and the walk's own steps stay. From the
+    accelerometer alone the interval covers the whole move (a quarter window beyond it); with the gyroscope it is
+    the move's turning, inside the true move."""
+    from pdr.io.recording import GYR_COLUMNS
     from pdr.io.tomlio import read_toml
     from pdr.steps.handling import AttitudeHandlingDetection
     from pdr.signals import uniform_imu
 
     rec = simulate(read_toml(HANDLING_SCENARIO), seed=123)
+    imu = rec.imu if gyroscope else rec.imu.drop(columns=list(GYR_COLUMNS))
     truth = rec.reference["handling"][["t_start_s", "t_end_s"]].to_numpy()
-    found = AttitudeHandlingDetection().detect(uniform_imu(rec.imu)).intervals_
+    found = AttitudeHandlingDetection().detect(uniform_imu(imu)).intervals_
     assert len(found) == 2
     for (a, b), (c, d) in zip(truth, found[["t_start_s", "t_end_s"]].to_numpy()):
         assert c < b and d > a  # overlapping the true move
+        if gyroscope:
+            assert a <= c < d <= b
     n_true = len(rec.reference["steps"])
-    kept = WaveletStepDetection(leave_out_handling=True).detect(rec.imu)
-    counted_all = len(WaveletStepDetection().detect(rec.imu).steps_)
+    kept = WaveletStepDetection(leave_out_handling=True).detect(imu)
+    counted_all = len(WaveletStepDetection().detect(imu).steps_)
     assert counted_all >= n_true + 4  # the hand's movements taken for steps
     assert abs(len(kept.steps_) - n_true) <= 1
     t = kept.steps_["t_s"].to_numpy()
-    assert not any(((t > a) & (t < b)).any() for a, b in truth)
+    if not gyroscope:
+        assert not any(((t > a) & (t < b)).any() for a, b in truth)
     pd.testing.assert_frame_equal(kept.handling_, found)
     np.testing.assert_allclose(kept.left_out_[["t_start_s", "t_end_s"]], found[["t_start_s", "t_end_s"]])
     assert kept.left_out_["n_maxima"].sum() >= 4
     with warns(match=r"the phone was handled at .* s, .* s .*not counted as steps"):
-        assert len(detect_steps(rec, {})) == len(kept.steps_)  # on for a phone in the hand
+        assert len(detect_steps(dataclasses.replace(rec, imu=imu), {})) == len(kept.steps_)  # on for a phone in the hand
     assert make_detector(None, "waist").leave_out_handling is False  # a strapped sensor is not handled
 
 
@@ -410,3 +419,45 @@ def test_steady_walks_have_no_handling():
                         "segment": [{"duration_s": 3.0, "speed_mps": 0.0}, {"duration_s": 40.0, "speed_mps": 1.2}],
                         "imu": [{"placement": placement}], "gnss": {"enabled": False}}, seed=1)
         assert AttitudeHandlingDetection().detect(uniform_imu(rec.imu)).intervals_.empty, placement
+
+
+def test_gyroscope_times_the_handling_to_the_move():
+    """The walker sets off while the phone still comes out of the pocket: the gyroscope ends the interval where the
+    phone stops turning (inside the true move, before the first step), so that step is counted; the accelerometer
+    alone reaches past it and loses it."""
+    from pdr.io.recording import GYR_COLUMNS
+    from pdr.signals import uniform_imu
+    from pdr.steps.handling import AttitudeHandlingDetection
+
+    sc = {"route": {"waypoints_m": [[0.0, 0.0], [200.0, 0.0]], "loop": False},
+          "segment": [{"duration_s": 2.2, "speed_mps": 0.0}, {"duration_s": 12.0, "speed_mps": 1.3},
+                      {"duration_s": 3.0, "speed_mps": 0.0}],
+          "imu": [{"placement": "hand", "rate_hz": 100.0, "handling_s": 2.0, "in_pocket_s": [[0.0, 1.0]]}],
+          "gnss": {"enabled": False}}
+    rec = simulate(sc, seed=3)
+    (a, b), = rec.reference["handling"][["t_start_s", "t_end_s"]].to_numpy()
+    first_step = rec.reference["steps"]["t_s"].iloc[0]
+    assert first_step < b  # taken while the phone still turns
+    acc_only = rec.imu.drop(columns=list(GYR_COLUMNS))
+    (c, d), = AttitudeHandlingDetection().detect(uniform_imu(rec.imu)).intervals_[["t_start_s", "t_end_s"]].to_numpy()
+    (e, f), = AttitudeHandlingDetection().detect(uniform_imu(acc_only)).intervals_[["t_start_s", "t_end_s"]].to_numpy()
+    assert a < c < d < first_step < f < b
+    n_true = len(rec.reference["steps"])
+    assert len(WaveletStepDetection(leave_out_handling=True).detect(rec.imu).steps_) == n_true
+    assert len(WaveletStepDetection(leave_out_handling=True).detect(acc_only).steps_) == n_true - 1
+
+
+def test_a_slow_tilt_is_not_handling_with_a_gyroscope():
+    """A phone at rest tilting by 90° over 4 s (0.39 rad/s, as slow as the trunk's own tilt): the accelerometer's
+    windows see a turn, the gyroscope no move of the hand."""
+    from pdr.signals import uniform_imu
+    from pdr.steps.handling import AttitudeHandlingDetection
+
+    t = np.arange(0.0, 12.0, 0.01)
+    rate = np.where((t >= 4.0) & (t < 8.0), 0.5 * np.pi / 4.0, 0.0)
+    angle = np.concatenate([[0.0], np.cumsum(0.5 * (rate[1:] + rate[:-1]) * 0.01)])
+    imu = pd.DataFrame({"t_s": t, "acc_x_mps2": 0.0, "acc_y_mps2": GRAVITY_MPS2 * np.sin(angle),
+                        "acc_z_mps2": GRAVITY_MPS2 * np.cos(angle)})
+    assert len(AttitudeHandlingDetection().detect(uniform_imu(imu)).intervals_) == 1
+    imu = imu.assign(gyr_x_radps=rate, gyr_y_radps=0.0, gyr_z_radps=0.0)
+    assert AttitudeHandlingDetection().detect(uniform_imu(imu)).intervals_.empty

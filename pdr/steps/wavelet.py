@@ -211,6 +211,9 @@ class WaveletStepDetection(Algorithm):
             decided = walking.copy()  # walking where a window decided it: not the recording's ends
             edge = undecided_samples(u.rate_hz, self.bout_window_s)
             decided[:edge] = decided[len(decided) - edge:] = False
+            # a gyroscope times the handling to the move itself: a walking window centred within half a window of
+            # it holds the move, so it does not show walking beside it
+            reach = int(round(0.5 * self.bout_window_s * u.rate_hz)) if u.gyr_radps is not None else 0
         sums = (np.concatenate([[0.0], np.cumsum(x)]), np.concatenate([[0.0], np.cumsum(x * x)]))
         times, bout_ids, rows, left_out = [], [], [], []
         bout_id = 0
@@ -224,7 +227,7 @@ class WaveletStepDetection(Algorithm):
             local = moving_average(np.where(np.isfinite(local), local, step_s), int(round(self.bout_window_s * u.rate_hz)))
             t_peaks = self._bout_steps(u, x, a, b, local, core[a:b], sums)
             if handled is not None:
-                t_peaks, dropped = self._leave_out_handling(u, handled.handling_, decided, a, b, t_peaks)
+                t_peaks, dropped = self._leave_out_handling(u, handled.handling_, decided, a, b, t_peaks, reach)
                 left_out += dropped
             for seg in self._split_stops(t_peaks, step_s, max_step_s):
                 if len(seg) < self.min_bout_steps:
@@ -310,11 +313,11 @@ class WaveletStepDetection(Algorithm):
 
     @staticmethod
     def _leave_out_handling(u: UniformImu, handling: np.ndarray, walking: np.ndarray, a: int, b: int,
-                            t: np.ndarray) -> tuple[np.ndarray, list[tuple[float, float, int]]]:
+                            t: np.ndarray, reach: int = 0) -> tuple[np.ndarray, list[tuple[float, float, int]]]:
         """``t`` without the maxima inside the handling intervals at an edge of the bout ``[a, b)``: no walking
-        (``walking``: windows found gait-periodic) between the interval and the bout's start, or between it and the
-        bout's end. There the walker starts or stops, and the acceleration is the hand's. Handling with walking on
-        both sides (the phone taken out while walking on) keeps its steps. Also returns the intervals that lost
+        (``walking``: windows found gait-periodic, their centres more than ``reach`` samples from the interval)
+        between the interval and the bout's start, or between it and the bout's end. There the walker starts or
+        stops, and the acceleration is the hand's. Handling with walking on both sides (the phone taken out while walking on) keeps its steps. Also returns the intervals that lost
         maxima: ``(t_start_s, t_end_s, n_maxima)``."""
         k = np.clip(np.round((t - u.t_s[0]) * u.rate_hz).astype(int), 0, len(u) - 1)
         keep = np.ones(len(t), bool)
@@ -322,7 +325,7 @@ class WaveletStepDetection(Algorithm):
         for lo, hi in runs(handling[a:b]):
             lo, hi = a + lo, a + hi
             inside = (k >= lo) & (k < hi)
-            if inside.any() and not (walking[a:lo].any() and walking[hi:b].any()):
+            if inside.any() and not (walking[a:max(a, lo - reach)].any() and walking[hi + reach:b].any()):
                 keep &= ~inside
                 dropped.append((float(u.t_s[lo]), float(u.t_s[hi - 1]), int(inside.sum())))
         return t[keep], dropped
