@@ -419,10 +419,11 @@ class SlipOpticalFlowStride(Algorithm):
                 f["spread_m"] = max(f["spread_m"], spread)
             elif "clearance_stride_m" in f:
                 # an error of the scale e becomes e / (1 - g) at the fixed point of gain g
+                # (over MAX_CLEARANCE_AMPLIFICATION the window fails: the scale doubles any error of the fit)
                 f["clearance_gain"] = gain = self._clearance_gain(f)
-                if not np.isfinite(gain) or gain >= 1.0:
+                if not np.isfinite(gain) or gain >= 1.0 - 1.0 / MAX_CLEARANCE_AMPLIFICATION:
                     f["flag"] = "+".join(x for x in (f["flag"], "gain") if x)
-                else:
+                if np.isfinite(gain) and gain < 1.0:
                     f["length_std_m"] /= 1.0 - max(gain, 0.0)
 
     def _clearance_gain(self, fit: dict) -> float:
