@@ -163,8 +163,9 @@ class SlipOpticalFlowStride(Algorithm):
         spread of the near-best minima), ``residual_fraction``, ``vx_mps, vy_mps, leg_angle_rad, stiffness_npm, cost, rms_pxps,
         sim_duration_s, meas_duration_s, length_m, length_std_m, m_per_px, meas_disp_px, time_s`` (and with
         ``clearance_from="flow"`` ``clearance_stride_m``, the stride that set the swing clearance,
-        ``clearance_converged`` and ``clearance_gain``, the fixed point's gain g; a gain that cannot be computed
-        or reaches 1 flags the fit "gain").
+        ``clearance_converged`` and ``clearance_gain``, the fixed point's gain g; a gain of 0.5 or more, the
+        fixed point doubling any error of the scale (``MAX_CLEARANCE_AMPLIFICATION``), or none computed, flags
+        the fit "gain").
 
     Notes
     -----
@@ -380,7 +381,8 @@ class SlipOpticalFlowStride(Algorithm):
         rendered walks, quadratic converges in 3-4 passes. At the fixed point s = m(s) d (m the metres per pixel,
         d the image displacement) an error e of the scale becomes e / (1 - g), g = d ln m / d ln s the gain
         (:meth:`_clearance_gain`): the sigma of a converged window is multiplied by 1 / (1 - g) (0.2-0.5 on the
-        tuning people, the most for short legs with a camera low over the floor and long strides).
+        tuning people, the most for short legs with a camera low over the floor and long strides), and one whose
+        1 / (1 - g) reaches ``MAX_CLEARANCE_AMPLIFICATION`` fails (flag "gain": no scale of its own).
         """
         half = max(0, int(self.scale_windows) // 2)
         start = [(f["length_m"], f["m_per_px"], f["length_std_m"]) for f in fits]
