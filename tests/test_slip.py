@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from pdr.constants import GRAVITY_MPS2
-from pdr.errors import InputError
+from pdr.errors import InputError, collect_warnings
 from pdr.slip import SlipBody, simulate_flow, simulate_step, stride_kinematics
 from pdr.slip.fit import SlipOpticalFlowStride, segment_strides
 from conftest import warns
@@ -181,3 +181,23 @@ def test_a_runaway_swing_clearance_keeps_the_slip_clearance_with_a_wide_sigma():
     assert not fits.clearance_converged.any()
     np.testing.assert_allclose(fits.length_m, own.fits_.length_m, rtol=1e-9)  # the SLIP's own clearance
     assert np.all(fits.length_std_m > own.fits_.length_std_m) and np.all(fits.length_std_m >= 0.5 * fits.spread_m)
+
+
+def test_the_clearance_fixed_point_widens_the_sigma_by_its_gain():
+    # s = m(s) d: a scale error e becomes e / (1 - g); a steeper clearance law has a larger gain and a wider sigma
+    est = SlipOpticalFlowStride(camera_from_knee_m=0.3, focal_px=140.0, strides_per_fit=1, scale_windows=1)
+    t, f, _, _ = _measured(est, (1.3, -0.2, math.radians(15), 12000.0))
+    gains = {}
+    for ratio in (0.005, 0.025, 0.05):
+        with collect_warnings():
+            fits = SlipOpticalFlowStride(**{**est.get_params(), "swing_clearance_ratio": ratio}).estimate(t, f).fits_
+        assert fits.clearance_converged.all()
+        g = fits.clearance_gain.to_numpy()
+        assert np.all((g >= 0) & (g < 1))
+        assert np.all(fits.length_std_m / fits.length_m >= est.model_sigma_fraction / (1 - g) - 1e-9)
+        # a fixed point that doubles any error of the scale (1 / (1 - g) >= 2) fails
+        np.testing.assert_array_equal(fits.flag == "gain", g >= 0.5)
+        gains[ratio] = float(np.median(g))
+    assert gains[0.005] < 0.05 < gains[0.025] < gains[0.05]
+    own = SlipOpticalFlowStride(**{**est.get_params(), "clearance_iterations": 0}).estimate(t, f).fits_
+    assert (own.clearance_gain == 0).all()  # the SLIP's own clearance: no fixed point, no gain

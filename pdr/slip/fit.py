@@ -20,6 +20,7 @@ SEGMENT_COLUMNS = ["t_start_s", "t_toe_off_s", "t_end_s"]
 # (well inside the model's own error, ``model_sigma_fraction``)
 CLEARANCE_TOLERANCE = 0.02
 MAX_CLEARANCE_AMPLIFICATION = 2.0  # the fixed point may at most double the first pass's change of the stride
+GAIN_STEP = 1.05  # relative step of the clearance stride in the finite difference of the fixed point's gain
 # Thesis Table 2 (vx m/s, vy m/s, leg angle 10 deg, K); K read as tens of kN/m (its code uses 18,000 N/m).
 TABLE2_STARTS = tuple((vx, vy, math.radians(10.0), k) for vx, vy, k in (
     (1.6, -0.5, 17000.0), (1.5, -0.5, 16000.0), (1.6, -0.5, 15000.0), (1.4, -0.5, 17000.0), (1.2, -0.5, 18000.0)))
@@ -140,8 +141,9 @@ class SlipOpticalFlowStride(Algorithm):
     duration_weight : weight of the squared log ratio of simulated to measured stride time in the cost
         (the time warp absorbs small mismatches; a large one means the fitted dynamics are wrong).
     length_scale : per-user factor on the model's stride length (1: none; see ``calibrate``).
-    model_sigma_fraction : model error floor of the stride sigma, as a fraction of the length (0.07: the
-        per-stride RMS error on the tuning people of ``benchmarks/bench_leg_camera.py``).
+    model_sigma_fraction : model error floor of the stride sigma, as a fraction of the length, before the
+        swing-clearance fixed point multiplies it by 1 / (1 - gain) (0.05: the per-stride RMS error divided by that
+        factor on the tuning people of ``benchmarks/bench_leg_camera.py``; 97% of their errors within 2 sigma).
     min_quality : windows whose mean flow quality is below this give no stride (with a warning).
     multimodal_cost_ratio : refined starts whose cost is within this fraction of the best are other minima of the
         fit; half the spread of their strides joins the sigma.
@@ -160,8 +162,10 @@ class SlipOpticalFlowStride(Algorithm):
     fits_ : one row per fitted window: ``flag`` ("" or the failures, "bound" / "residual"), ``spread_m`` (stride
         spread of the near-best minima), ``residual_fraction``, ``vx_mps, vy_mps, leg_angle_rad, stiffness_npm, cost, rms_pxps,
         sim_duration_s, meas_duration_s, length_m, length_std_m, m_per_px, meas_disp_px, time_s`` (and with
-        ``clearance_from="flow"`` ``clearance_stride_m``, the stride that set the swing clearance, and
-        ``clearance_converged``).
+        ``clearance_from="flow"`` ``clearance_stride_m``, the stride that set the swing clearance,
+        ``clearance_converged`` and ``clearance_gain``, the fixed point's gain g; a gain of 0.5 or more, the
+        fixed point doubling any error of the scale (``MAX_CLEARANCE_AMPLIFICATION``), or none computed, flags
+        the fit "gain").
 
     Notes
     -----
@@ -185,7 +189,7 @@ class SlipOpticalFlowStride(Algorithm):
                  integral_weight: float = 10.0,
                  strides_per_fit: int = 2,
                  length_from: str = "flow", scale_windows: int = 5, n_refine: int = 2, max_evals: int = 60, duration_weight: float = 0.0, length_scale: float = 1.0,
-                 model_sigma_fraction: float = 0.07, min_quality: float = 0.3, foot: str = "left",
+                 model_sigma_fraction: float = 0.05, min_quality: float = 0.3, foot: str = "left",
                  clearance_from: str = "flow", clearance_iterations: int = 4, multimodal_cost_ratio: float = 0.1,
                  max_residual_fraction: float = 0.5):
         self.thigh_length_m = thigh_length_m
@@ -374,7 +378,11 @@ class SlipOpticalFlowStride(Algorithm):
         the fitted states are re-simulated with the clearance of the flow stride (median over neighbouring
         windows, as for the scale), a few fixed-point passes. The metres per pixel the clearance sets must grow
         slower than the stride for the fixed point to be stable: with a law cubic in the stride it diverged on
-        rendered walks, quadratic converges in 3-4 passes.
+        rendered walks, quadratic converges in 3-4 passes. At the fixed point s = m(s) d (m the metres per pixel,
+        d the image displacement) an error e of the scale becomes e / (1 - g), g = d ln m / d ln s the gain
+        (:meth:`_clearance_gain`): the sigma of a converged window is multiplied by 1 / (1 - g) (0.2-0.5 on the
+        tuning people, the most for short legs with a camera low over the floor and long strides), and one whose
+        1 / (1 - g) reaches ``MAX_CLEARANCE_AMPLIFICATION`` fails (flag "gain": no scale of its own).
         """
         half = max(0, int(self.scale_windows) // 2)
         start = [(f["length_m"], f["m_per_px"], f["length_std_m"]) for f in fits]
@@ -405,11 +413,34 @@ class SlipOpticalFlowStride(Algorithm):
             step = one - length0
             amplification = (f["length_m"] - length0) / step if abs(step) > 1e-3 * length0 else 1.0
             f["clearance_converged"] = bool(moved <= CLEARANCE_TOLERANCE and amplification <= MAX_CLEARANCE_AMPLIFICATION)
+            f["clearance_gain"] = 0.0
             if not f["clearance_converged"]:
                 spread = abs(f["length_m"] - length0)
                 f["length_m"], f["m_per_px"] = length0, scale0
                 f["length_std_m"] = math.sqrt(sigma0 ** 2 + (0.5 * spread) ** 2)
                 f["spread_m"] = max(f["spread_m"], spread)
+            elif "clearance_stride_m" in f:
+                # an error of the scale e becomes e / (1 - g) at the fixed point of gain g
+                # (over MAX_CLEARANCE_AMPLIFICATION the window fails: the scale doubles any error of the fit)
+                f["clearance_gain"] = gain = self._clearance_gain(f)
+                if not np.isfinite(gain) or gain >= 1.0 - 1.0 / MAX_CLEARANCE_AMPLIFICATION:
+                    f["flag"] = "+".join(x for x in (f["flag"], "gain") if x)
+                if np.isfinite(gain) and gain < 1.0:
+                    f["length_std_m"] /= 1.0 - max(gain, 0.0)
+
+    def _clearance_gain(self, fit: dict) -> float:
+        """d ln(stride) / d ln(clearance stride) of a window at its fixed point: how much a stride longer than the
+        window's grows its own flow-to-metres scale through the swing clearance (finite difference of 5%)."""
+        p = (fit["vx_mps"], fit["vy_mps"], fit["leg_angle_rad"], fit["stiffness_npm"])
+        ref = fit["clearance_stride_m"]
+        out = []
+        for s in (ref, GAIN_STEP * ref):
+            sim = self.simulate(p, fit["stance_fraction"], clearance_stride_m=s)
+            disp = float(np.trapezoid(sim[1], sim[0])) if sim is not None else 0.0
+            if disp <= 0:
+                return float("nan")
+            out.append(sim[2] / disp)
+        return math.log(out[1] / out[0]) / math.log(GAIN_STEP)
 
     def _grid(self, stance_fraction: float) -> list[tuple]:
         """Coarse grid of SLIP strides (the first stage of the multi-start)."""
