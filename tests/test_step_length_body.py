@@ -224,9 +224,23 @@ def test_cohorts_differ_and_unknown_ones_are_errors():
     impaired = GaitUser.draw(np.random.default_rng(1), cohort="impaired")
     leg = Body(1.7).leg_length_m
     assert impaired.step_length_m(0.8, leg) < 0.85 * healthy.step_length_m(0.8, leg)
-    assert impaired.cv_slow == 2 * healthy.cv_slow
+    # per-step variability as published for MS and stroke walkers (Kalron 2016; Oken et al. 2008), at every speed
+    assert 0.055 <= impaired.length_cv(0.5) == impaired.length_cv(0.9) <= 0.093
+    assert healthy.length_cv(0.6) == pytest.approx(0.15)
     with pytest.raises(InputError, match="cohort"):
         GaitUser.draw(rng, cohort="athlete")
+
+
+def test_simulated_impaired_walkers_vary_as_published():
+    """Step-length and step-duration CV of a simulated impaired walk within the walkway studies' range (MS: 5.5-9.3%,
+    Kalron 2016; stroke: 7.5%, duration 6.3%, Oken et al. 2008), not twice the healthy law's 15-30%."""
+    sc = {"route": {"waypoints_m": [[0, 0], [60, 0], [60, 30], [0, 30]]}, "subject": {"height_m": 1.65, "cohort": "impaired"},
+          "segment": [{"duration_s": 2, "speed_mps": 0}, {"duration_s": 40, "speed_mps": 0.6}], "gnss": {"enabled": False}}
+    for seed in (0, 1):
+        steps = simulate(sc, seed=seed).reference["steps"].iloc[2:-2]  # without the start and stop
+        for col in ("step_length_m", "step_duration_s"):
+            cv = steps[col].std() / steps[col].mean()
+            assert 0.04 < cv < 0.11, (seed, col, cv)
 
 
 def test_simulated_subject_is_measured_not_exact():
