@@ -123,6 +123,35 @@ def test_calibration_never_reaches_a_negative_slope():
     assert akf.updated_ == "all" and akf.model_.b_m_per_hz == 0.0
 
 
+def _leg_distances(steps: pd.DataFrame, length: np.ndarray, every: int, std_m: float, seed: int) -> pd.DataFrame:
+    """Known distances of consecutive legs of ``every`` steps, measured to ``std_m``."""
+    rng = np.random.default_rng(seed)
+    starts = range(0, len(steps) - every, every)
+    return pd.DataFrame({"t_start_s": [steps.t_s[k] for k in starts], "t_end_s": [steps.t_s[k + every] for k in starts],
+                         "distance_m": [length[k + 1:k + every + 1].sum() + std_m * rng.standard_normal() for k in starts],
+                         "distance_std_m": std_m})
+
+
+def test_calibration_follows_a_drifting_level_and_keeps_a_steady_one():
+    freq = np.full(600, 1.8)
+    steps = _steps(freq, 4)
+    prior = RegressionStepLength.population()
+    steady = np.full(600, 0.75)
+    akf = AdaptiveKalmanCalibration().fit(steps, None, prior, distances=_leg_distances(steps, steady, 20, 0.3, 1))
+    static = AdaptiveKalmanCalibration(level_drift_std_m=0.0).fit(steps, None, prior,
+                                                                  distances=_leg_distances(steps, steady, 20, 0.3, 1))
+    assert akf.level_drift_std_m_ == 0.0 and np.allclose(akf.model_.theta, static.model_.theta)
+    shortening = np.linspace(0.85, 0.70, 600)  # the step shortens through the walk at the same cadence
+    table = _leg_distances(steps, shortening, 20, 0.3, 2)
+    akf = AdaptiveKalmanCalibration().fit(steps, None, prior, distances=table)
+    static = AdaptiveKalmanCalibration(level_drift_std_m=0.0).fit(steps, None, prior, distances=table)
+    last = {m: float(m.estimate(steps.iloc[-1:]).step_length_m_[0]) for m in (akf.model_, static.model_)}
+    assert akf.level_drift_std_m_ > 0
+    assert abs(last[akf.model_] - 0.70) < 0.02 and abs(last[static.model_] - 0.775) < 0.02  # the end, not the mean
+    with pytest.raises(InputError, match="level_drift_std_m"):
+        AdaptiveKalmanCalibration(level_drift_std_m=-1.0).fit(steps, None, prior, distances=table)
+
+
 # ------------------------------------------------------------------------------------------------ known distances
 def test_a_walk_of_known_length_sets_the_level_and_scales_with_it():
     freq = np.full(300, 1.8)
