@@ -4,6 +4,7 @@ calibration, the graph's in-run calibration guard, and the simulated people it i
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -69,15 +70,20 @@ def test_implausible_subjects_are_one_error(subject, message):
         check_subject(subject)
 
 
-def test_cli_run_with_a_height_in_centimetres_is_one_error_line(tmp_path, capsys):
+@pytest.mark.parametrize("key, value, message", [("height_m", "175", "centimetres"),
+                                                 ("leg_length_m", "1.9", "leg longer than the body"),
+                                                 ("sensor_height_m", "1.9", "sensor above the head")])
+def test_cli_run_with_an_implausible_subject_is_one_error_line(tmp_path, capsys, key, value, message):
     rec = simulate({"route": {"waypoints_m": [[0, 0], [50, 0]]},
                     "segment": [{"duration_s": 2, "speed_mps": 0}, {"duration_s": 8, "speed_mps": 1.3}]}, seed=1)
     path = save_recording(rec, tmp_path / "rec")
     meta = (path / "meta.toml").read_text()
-    (path / "meta.toml").write_text(meta.replace(f"height_m = {rec.subject['height_m']}", "height_m = 175"))
+    meta, n = re.subn(rf"^{key} = .*$", f"{key} = {value}", meta, flags=re.M)
+    assert n == 1
+    (path / "meta.toml").write_text(meta)
     assert main(["run", str(path), "-o", str(tmp_path / "out")]) == 1
     err = capsys.readouterr().err
-    assert err.startswith("error:") and "centimetres" in err and len(err.strip().splitlines()) == 1
+    assert err.startswith("error:") and message in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "out").exists()
 
 
@@ -118,9 +124,13 @@ def test_calibration_never_reaches_a_negative_slope():
     known = pd.DataFrame({"t_start_s": [steps.t_s[k] for k in range(0, 580, 20)],
                           "t_end_s": [steps.t_s[k + 20] for k in range(0, 580, 20)],
                           "distance_m": [length[k + 1:k + 21].sum() for k in range(0, 580, 20)], "distance_std_m": 0.05})
-    with warns(match="held at 0"):
+    with warns(match="held at 0"):  # a steady level (the default): only the slope can follow the cadence
         akf = AdaptiveKalmanCalibration().fit(steps, None, RegressionStepLength.population(), distances=known)
     assert akf.updated_ == "all" and akf.model_.b_m_per_hz == 0.0
+    with collect_warnings():  # the level may drift instead (the cadence rose through the walk): never a negative slope
+        akf = AdaptiveKalmanCalibration(level_drift_std_m=None).fit(steps, None, RegressionStepLength.population(),
+                                                                    distances=known)
+    assert akf.model_.b_m_per_hz >= 0.0
 
 
 def _leg_distances(steps: pd.DataFrame, length: np.ndarray, every: int, std_m: float, seed: int) -> pd.DataFrame:
@@ -136,15 +146,14 @@ def test_calibration_follows_a_drifting_level_and_keeps_a_steady_one():
     freq = np.full(600, 1.8)
     steps = _steps(freq, 4)
     prior = RegressionStepLength.population()
-    steady = np.full(600, 0.75)
-    akf = AdaptiveKalmanCalibration().fit(steps, None, prior, distances=_leg_distances(steps, steady, 20, 0.3, 1))
-    static = AdaptiveKalmanCalibration(level_drift_std_m=0.0).fit(steps, None, prior,
-                                                                  distances=_leg_distances(steps, steady, 20, 0.3, 1))
+    table = _leg_distances(steps, np.full(600, 0.75), 20, 0.3, 1)
+    akf = AdaptiveKalmanCalibration(level_drift_std_m=None).fit(steps, None, prior, distances=table)
+    static = AdaptiveKalmanCalibration().fit(steps, None, prior, distances=table)
     assert akf.level_drift_std_m_ == 0.0 and np.allclose(akf.model_.theta, static.model_.theta)
     shortening = np.linspace(0.85, 0.70, 600)  # the step shortens through the walk at the same cadence
     table = _leg_distances(steps, shortening, 20, 0.3, 2)
-    akf = AdaptiveKalmanCalibration().fit(steps, None, prior, distances=table)
-    static = AdaptiveKalmanCalibration(level_drift_std_m=0.0).fit(steps, None, prior, distances=table)
+    akf = AdaptiveKalmanCalibration(level_drift_std_m=None).fit(steps, None, prior, distances=table)
+    static = AdaptiveKalmanCalibration().fit(steps, None, prior, distances=table)  # the default: steady
     last = {m: float(m.estimate(steps.iloc[-1:]).step_length_m_[0]) for m in (akf.model_, static.model_)}
     assert akf.level_drift_std_m_ > 0
     assert abs(last[akf.model_] - 0.70) < 0.02 and abs(last[static.model_] - 0.775) < 0.02  # the end, not the mean

@@ -38,7 +38,9 @@ class AdaptiveKalmanCalibration(Algorithm):
         (:func:`pdr.calibration.segments.clean_fixes`; 0 s = no smoothing).
     adapt_gnss_noise : scale the GNSS part of the measurement noise to the residuals of a first fit (see Notes).
     level_drift_std_m : standard deviation per step of the random walk of the model's level (m of step length);
-        None: estimated from the segments (see Notes).
+        None: estimated from the segments (see Notes). Default 0 (a steady level), chosen on the simulated tuning
+        people (1.75 m, seeds 0-1, waist and hand, calibrated on known distances, the rest of the walk predicted:
+        mean error 1.8% with 0, 2.0% estimated, 2.1% with 2 mm, 3.9% with 5 mm per step).
 
     Attributes
     ----------
@@ -78,8 +80,9 @@ class AdaptiveKalmanCalibration(Algorithm):
     al. 2005, "GPS analysis of human locomotion", Hum Mov Sci 24:97-115). The level (the model's first parameter)
     therefore follows a random walk of ``level_drift_std_m`` per step, and the model returned is its state at the end
     of the data (what follows), not the mean over them; with no drift this is the plain Bayesian fit. The drift is
-    estimated from the segments by maximum likelihood unless given: the data must show it against their own noise
-    (on steady simulated walkers it comes out 0).
+    estimated from the differences between the segments (restricted maximum likelihood) with
+    ``level_drift_std_m=None``: the data must show it against their own noise (on steady simulated walkers it mostly
+    comes out 0, but a change of pace that the model's cadence law does not follow exactly can pass for a drift).
 
     Example
     -------
@@ -94,7 +97,7 @@ class AdaptiveKalmanCalibration(Algorithm):
                  min_straightness: float = 0.7, min_step_m: float = 0.2, max_step_m: float = 1.6,
                  min_freq_spread_hz: float = 0.1, outlier_h_acc_factor: float = 5.0, gnss_smoothing_s: float = 2.0,
                  adapt_gnss_noise: bool = True, model_segment_steps: float = 60.0,
-                 level_drift_std_m: float | None = None):
+                 level_drift_std_m: float | None = 0.0):
         self.measurement_std_m = measurement_std_m
         self.process_std_init_m = process_std_init_m
         self.process_std_min_m = process_std_min_m
@@ -305,8 +308,10 @@ class AdaptiveKalmanCalibration(Algorithm):
         prior_inv = np.linalg.inv(prior[np.ix_(cols, cols)])
         noise = np.diag(1.0 / w)
         if steps_to_end is not None and cols[0] == 0:  # the level (the first parameter) may drift
-            drift, self.level_drift_std_m_ = self._drift_covariance(x[:, 0], np.asarray(steps_to_end, float),
-                                                                    xf @ prior[np.ix_(cols, cols)] @ xf.T + noise,
+            pc = prior[np.ix_(cols, cols)]
+            others = pc[1:, 1:] - np.outer(pc[1:, 0], pc[0, 1:]) / pc[0, 0]  # the other parameters given the level
+            drift, self.level_drift_std_m_ = self._drift_covariance(xf[:, 0], np.asarray(steps_to_end, float),
+                                                                    xf[:, 1:] @ others @ xf[:, 1:].T + noise,
                                                                     y - xf @ theta0[cols])
             noise = noise + drift
         noise_inv = np.linalg.inv(noise)
@@ -332,9 +337,11 @@ class AdaptiveKalmanCalibration(Algorithm):
         deviation ``level_drift_std_m`` in step length; a segment ``s`` steps before the end differs from the level
         at the end by the walk over those steps, so two segments share the walk after the later one's middle
         (``q g_i g_j min(s_i, s_j)``, ``g`` the level's design value relative to its mean). None: the drift of
-        largest marginal likelihood of the segments (``cov0``: their covariance without drift, ``resid0``: their
-        residuals from the prior model), over 0 and 0.2 mm to 2 cm per step (adaptive estimation from the
-        innovations, as Ladetto et al. 2000 adapt the filter's process noise). Returns the covariance and the drift."""
+        largest restricted likelihood over 0 and 0.2 mm to 2 cm per step (adaptive estimation from the innovations,
+        as Ladetto et al. 2000 adapt the filter's process noise): ``cov0`` is the segments' covariance without drift
+        and with the level unknown, ``resid0`` their residuals from the prior model; the level is profiled out, so
+        only the differences between segments speak for a drift (one segment: none). Returns the covariance and the
+        drift."""
         g = level_design / np.mean(level_design)
         shape = np.outer(g, g) * np.minimum.outer(steps_to_end, steps_to_end)
         if self.level_drift_std_m is not None:
@@ -343,7 +350,12 @@ class AdaptiveKalmanCalibration(Algorithm):
         for q_std in (0.0, *np.geomspace(2e-4, 0.02, 21)):
             c = cov0 + q_std ** 2 * shape
             sign, logdet = np.linalg.slogdet(c)
-            ll = -0.5 * (logdet + resid0 @ np.linalg.solve(c, resid0)) if sign > 0 else -np.inf
+            if sign <= 0:
+                continue
+            ci_g, ci_r = np.linalg.solve(c, g), np.linalg.solve(c, resid0)
+            info = float(g @ ci_g)
+            r = resid0 - g * float(g @ ci_r) / info
+            ll = -0.5 * (logdet + np.log(info) + r @ np.linalg.solve(c, r))
             if ll > best_ll + 1e-9:
                 best, best_ll = float(q_std), ll
         return best ** 2 * shape, best
