@@ -228,7 +228,7 @@ def _humolire_rows(tmp: Path) -> list[dict]:
             after = akf.model_.estimate(steps[sel], rec.subject).step_length_m_.sum()
             case = (f"[test] HuMoLiRe phone in hand, {name}: lap 2 ({dist2:.1f} m) after calibrating on lap 1 landmarks "
                     f"({int(akf.model_segments_['used'].sum())} segments, {akf.distance_m_:.1f} m, updated {akf.updated_}, "
-                    f"level drift estimated {1000 * akf.level_drift_std_m_:.1f} mm/step); "
+                    f"level drift {1000 * akf.level_drift_std_m_:.1f} mm/step); "
                     f"mean step lap 1 {lap_steps[0]:.3f} m at {freqs[0]:.2f} Hz, lap 2 {lap_steps[1]:.3f} m at {freqs[1]:.2f} Hz")
             target = "<= 2%" if name.startswith("body") else "alternative"
             rows.append(_row(case, "distance error", round(100.0 * (after / dist2 - 1.0), 1), "%", target, anchor))
@@ -401,7 +401,7 @@ def _simulated_rows(tmp: Path, seeds: list[int]) -> list[dict]:
     rows = []
     drift = ", ".join(f"{1000 * c['drift']:.1f}" for c in cases)
     for label, what in (("prior", f"body-based default ({c0['model']}), uncalibrated"),
-                        ("cal", f"calibrated with GPS ({c0['updated']} updated; level drift estimated {drift} mm/step)")):
+                        ("cal", f"calibrated with GPS ({c0['updated']} updated; level drift {drift} mm/step)")):
         target = "< 1%" if label == "cal" else "reference point"
         rows.append(_row(f"{case}: {c0['true_indoor_m']:.0f} m after GPS is lost, {what}; per seed {per_seed(label + '_indoor')}",
                          "distance error, mean |.| over seeds", round(float(np.mean([abs(c[f'{label}_indoor']) for c in cases])), 2),
