@@ -4,6 +4,7 @@ calibration, the graph's in-run calibration guard, and the simulated people it i
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -69,15 +70,20 @@ def test_implausible_subjects_are_one_error(subject, message):
         check_subject(subject)
 
 
-def test_cli_run_with_a_height_in_centimetres_is_one_error_line(tmp_path, capsys):
+@pytest.mark.parametrize("key, value, message", [("height_m", "175", "centimetres"),
+                                                 ("leg_length_m", "1.9", "leg longer than the body"),
+                                                 ("sensor_height_m", "1.9", "sensor above the head")])
+def test_cli_run_with_an_implausible_subject_is_one_error_line(tmp_path, capsys, key, value, message):
     rec = simulate({"route": {"waypoints_m": [[0, 0], [50, 0]]},
                     "segment": [{"duration_s": 2, "speed_mps": 0}, {"duration_s": 8, "speed_mps": 1.3}]}, seed=1)
     path = save_recording(rec, tmp_path / "rec")
     meta = (path / "meta.toml").read_text()
-    (path / "meta.toml").write_text(meta.replace(f"height_m = {rec.subject['height_m']}", "height_m = 175"))
+    meta, n = re.subn(rf"^{key} = .*$", f"{key} = {value}", meta, flags=re.M)
+    assert n == 1
+    (path / "meta.toml").write_text(meta)
     assert main(["run", str(path), "-o", str(tmp_path / "out")]) == 1
     err = capsys.readouterr().err
-    assert err.startswith("error:") and "centimetres" in err and len(err.strip().splitlines()) == 1
+    assert err.startswith("error:") and message in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "out").exists()
 
 
@@ -118,9 +124,41 @@ def test_calibration_never_reaches_a_negative_slope():
     known = pd.DataFrame({"t_start_s": [steps.t_s[k] for k in range(0, 580, 20)],
                           "t_end_s": [steps.t_s[k + 20] for k in range(0, 580, 20)],
                           "distance_m": [length[k + 1:k + 21].sum() for k in range(0, 580, 20)], "distance_std_m": 0.05})
-    with warns(match="held at 0"):
+    with warns(match="held at 0"):  # a steady level (the default): only the slope can follow the cadence
         akf = AdaptiveKalmanCalibration().fit(steps, None, RegressionStepLength.population(), distances=known)
     assert akf.updated_ == "all" and akf.model_.b_m_per_hz == 0.0
+    with collect_warnings():  # the level may drift instead (the cadence rose through the walk): never a negative slope
+        akf = AdaptiveKalmanCalibration(level_drift_std_m=None).fit(steps, None, RegressionStepLength.population(),
+                                                                    distances=known)
+    assert akf.model_.b_m_per_hz >= 0.0
+
+
+def _leg_distances(steps: pd.DataFrame, length: np.ndarray, every: int, std_m: float, seed: int) -> pd.DataFrame:
+    """Known distances of consecutive legs of ``every`` steps, measured to ``std_m``."""
+    rng = np.random.default_rng(seed)
+    starts = range(0, len(steps) - every, every)
+    return pd.DataFrame({"t_start_s": [steps.t_s[k] for k in starts], "t_end_s": [steps.t_s[k + every] for k in starts],
+                         "distance_m": [length[k + 1:k + every + 1].sum() + std_m * rng.standard_normal() for k in starts],
+                         "distance_std_m": std_m})
+
+
+def test_calibration_follows_a_drifting_level_and_keeps_a_steady_one():
+    freq = np.full(600, 1.8)
+    steps = _steps(freq, 4)
+    prior = RegressionStepLength.population()
+    table = _leg_distances(steps, np.full(600, 0.75), 20, 0.3, 1)
+    akf = AdaptiveKalmanCalibration(level_drift_std_m=None).fit(steps, None, prior, distances=table)
+    static = AdaptiveKalmanCalibration().fit(steps, None, prior, distances=table)
+    assert akf.level_drift_std_m_ == 0.0 and np.allclose(akf.model_.theta, static.model_.theta)
+    shortening = np.linspace(0.85, 0.70, 600)  # the step shortens through the walk at the same cadence
+    table = _leg_distances(steps, shortening, 20, 0.3, 2)
+    akf = AdaptiveKalmanCalibration(level_drift_std_m=None).fit(steps, None, prior, distances=table)
+    static = AdaptiveKalmanCalibration().fit(steps, None, prior, distances=table)  # the default: steady
+    last = {m: float(m.estimate(steps.iloc[-1:]).step_length_m_[0]) for m in (akf.model_, static.model_)}
+    assert akf.level_drift_std_m_ > 0
+    assert abs(last[akf.model_] - 0.70) < 0.02 and abs(last[static.model_] - 0.775) < 0.02  # the end, not the mean
+    with pytest.raises(InputError, match="level_drift_std_m"):
+        AdaptiveKalmanCalibration(level_drift_std_m=-1.0).fit(steps, None, prior, distances=table)
 
 
 # ------------------------------------------------------------------------------------------------ known distances
@@ -224,9 +262,23 @@ def test_cohorts_differ_and_unknown_ones_are_errors():
     impaired = GaitUser.draw(np.random.default_rng(1), cohort="impaired")
     leg = Body(1.7).leg_length_m
     assert impaired.step_length_m(0.8, leg) < 0.85 * healthy.step_length_m(0.8, leg)
-    assert impaired.cv_slow == 2 * healthy.cv_slow
+    # per-step variability as published for MS and stroke walkers (Kalron 2016; Oken et al. 2008), at every speed
+    assert 0.055 <= impaired.length_cv(0.5) == impaired.length_cv(0.9) <= 0.093
+    assert healthy.length_cv(0.6) == pytest.approx(0.15)
     with pytest.raises(InputError, match="cohort"):
         GaitUser.draw(rng, cohort="athlete")
+
+
+def test_simulated_impaired_walkers_vary_as_published():
+    """Step-length and step-duration CV of a simulated impaired walk within the walkway studies' range (MS: 5.5-9.3%,
+    Kalron 2016; stroke: 7.5%, duration 6.3%, Oken et al. 2008), not twice the healthy law's 15-30%."""
+    sc = {"route": {"waypoints_m": [[0, 0], [60, 0], [60, 30], [0, 30]]}, "subject": {"height_m": 1.65, "cohort": "impaired"},
+          "segment": [{"duration_s": 2, "speed_mps": 0}, {"duration_s": 40, "speed_mps": 0.6}], "gnss": {"enabled": False}}
+    for seed in (0, 1):
+        steps = simulate(sc, seed=seed).reference["steps"].iloc[2:-2]  # without the start and stop
+        for col in ("step_length_m", "step_duration_s"):
+            cv = steps[col].std() / steps[col].mean()
+            assert 0.04 < cv < 0.11, (seed, col, cv)
 
 
 def test_simulated_subject_is_measured_not_exact():

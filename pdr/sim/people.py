@@ -68,11 +68,16 @@ LEG_SCALE_SD = 0.025  # relative leg length, 1 SD (Bogin & Varela-Silva 2010)
 @dataclasses.dataclass(frozen=True)
 class Cohort:
     """How a group walks relative to healthy adults: factors on the step length at a given dimensionless speed, on
-    the per-step variability (length and duration), and on the vertical excursion of the pelvis."""
+    the per-step variability (length and duration), and on the vertical excursion of the pelvis. A group measured
+    directly gives its own per-step variability instead of the factor: ``length_cv_range`` (each person's
+    coefficient of variation of step length drawn uniformly in it, at every speed) and ``duration_cv`` (of the step
+    duration)."""
 
     length_factor: float = 1.0
     variability_factor: float = 1.0
     arc_factor: float = 1.0
+    length_cv_range: tuple[float, float] | None = None
+    duration_cv: float | None = None
 
 
 COHORTS = {
@@ -83,10 +88,13 @@ COHORTS = {
     "older": Cohort(length_factor=0.90, variability_factor=1.3),
     # impaired slow gait (multiple sclerosis, Parkinson's, after stroke; scenarios at 0.4-0.9 m/s): about 20% shorter
     # steps at the same speed, the cadence carrying more of the speed (Comber, Galvin & Coote 2017, meta-analysis of
-    # gait in MS), twice the step-to-step variability (Hausdorff 2005), and a 7% larger pelvis excursion for a given
-    # step: the inverted-pendulum factor fitted on people with MS is 4.587/4 against 4.739/4 for all participants
-    # (Soltani et al. 2021), and (4.739 / 4.587)^2 = 1.07
-    "impaired": Cohort(length_factor=0.80, variability_factor=2.0, arc_factor=1.07),
+    # gait in MS), and a 7% larger pelvis excursion for a given step: the inverted-pendulum factor fitted on people
+    # with MS is 4.587/4 against 4.739/4 for all participants (Soltani et al. 2021), and (4.739 / 4.587)^2 = 1.07.
+    # Per-step variability as measured on instrumented walkways: step-length CV 5.5% (EDSS 4.0-4.5) and 9.3% (EDSS
+    # 5.0-5.5) in 381 people with MS (Kalron 2016, J Neurol Sci 361:1-6), 7.5% in the 90 stroke patients walking
+    # faster than 0.34 m/s (Oken et al. 2008, Gait Posture 27:506-511); step-duration CV 6.3% (their single-support
+    # time CV, the same walkers)
+    "impaired": Cohort(length_factor=0.80, arc_factor=1.07, length_cv_range=(0.055, 0.093), duration_cv=0.063),
 }
 
 
@@ -119,18 +127,30 @@ class GaitUser:
     cohort: str = "healthy"
 
     @classmethod
-    def draw(cls, rng: np.random.Generator, *, cv_slow: float = 0.15, cv_fast: float = 0.04,
+    def draw(cls, rng: np.random.Generator, *, cv_slow: float | None = None, cv_fast: float | None = None,
              cohort: str = "healthy") -> "GaitUser":
-        """A random person of ``cohort`` (population spreads of the coefficients)."""
+        """A random person of ``cohort`` (population spreads of the coefficients). ``cv_slow`` / ``cv_fast`` given
+        replace the cohort's step-length variability (default: 0.15 / 0.04 times its factor, or its own range)."""
         if cohort not in COHORTS:
             raise InputError(f"subject.cohort: expected one of {', '.join(COHORTS)}, found {cohort!r}")
         group = COHORTS[cohort]
         z = rng.standard_normal(8)
         extra = rng.standard_normal(1)
         v = group.variability_factor
+        if group.length_cv_range is None:
+            cv_own = (0.15 * v, 0.04 * v)
+        else:
+            lo, hi = group.length_cv_range
+            cv_own = (float(rng.uniform(lo, hi)),) * 2
+        cv_slow = cv_own[0] if cv_slow is None else cv_slow
+        cv_fast = cv_own[1] if cv_fast is None else cv_fast
+        if group.duration_cv is None:
+            cv_time = 0.02 * v
+        else:  # the part of the duration's variability not shared with the length (plan_walk: 0.3 of its CV)
+            cv_time = float(np.sqrt(max(group.duration_cv ** 2 - (0.3 * cv_slow) ** 2, 0.0)))
         return cls(length_coef=float(0.78 * group.length_factor * (1 + 0.05 * z[0])),
                    length_exponent=float(np.clip(0.42 + 0.04 * z[1], 0.32, 0.52)),
-                   cv_slow=cv_slow * v, cv_fast=cv_fast * v, cv_time=0.02 * v,
+                   cv_slow=float(cv_slow), cv_fast=float(cv_fast), cv_time=cv_time,
                    step_width_m=float(np.clip(0.10 + 0.02 * z[2], 0.05, 0.16)),
                    sway_m=float(np.clip(0.025 + 0.006 * z[3], 0.01, 0.04)),
                    pelvic_rotation_deg=float(np.clip(4.0 + 1.0 * z[4], 1.5, 7.0)),

@@ -22,7 +22,8 @@ Scenario keys (TOML; every table but ``[[segment]]`` and ``[route]`` is optional
 ``[magnetic]`` ``field_ut``, ``inclination_deg``, ``declination_deg``, ``steel_ut`` (dipole strength, µT at 1 m),
     ``steel_spacing_m`` (one steel source per this many metres of indoor path; 0 = none).
 ``[barometer]`` ``drift_hpa_per_h`` (1-sigma of the weather drift rate).
-``[gait]`` ``cv_slow``, ``cv_fast`` (per-step step-length variability at 0.6 and 1.7 m/s).
+``[gait]`` ``cv_slow``, ``cv_fast`` (per-step step-length variability at 0.6 and 1.7 m/s; default: the cohort's,
+:data:`pdr.sim.people.COHORTS`).
 ``[camera]`` a leg camera rendered by :mod:`pdr.sim.camera`: ``fps, focal_px, cx_px, cy_px, width_px, height_px,
     segment, distance_from_knee_m, texture`` (``gravel``/``brick``/a path), optional ``t_start_s, t_end_s``.
 ``[[fault]]`` / ``[faults]`` sensor faults injected into the recording (:mod:`pdr.sim.faults`): explicit ones
@@ -200,8 +201,8 @@ def build_walk(sc: Scenario, seed: int) -> WalkKinematics:
     """The person, the route and the walk of a scenario (the body kinematics every sensor is made from)."""
     rng_person = np.random.default_rng([seed, _RNG_PERSON])
     height = float(sc.subject.get("height_m", np.clip(rng_person.normal(1.74, 0.08), 1.6, 1.9)))
-    user = GaitUser.draw(rng_person, cv_slow=float(sc.gait.get("cv_slow", 0.15)), cv_fast=float(sc.gait.get("cv_fast", 0.04)),
-                         cohort=str(sc.subject.get("cohort", "healthy")))
+    cv = {k: float(sc.gait[k]) for k in ("cv_slow", "cv_fast") if k in sc.gait}
+    user = GaitUser.draw(rng_person, **cv, cohort=str(sc.subject.get("cohort", "healthy")))
     body = Body(height, leg_scale=float(np.clip(1.0 + LEG_SCALE_SD * rng_person.standard_normal(), 0.9, 1.1)))
     bouts = plan_walk([(float(s["duration_s"]), float(s["speed_mps"])) for s in sc.segments], user, body,
                       np.random.default_rng([seed, _RNG_STEPS]))
