@@ -78,15 +78,15 @@ def local_step_freq_hz(step_start_s: np.ndarray, step_end_s: np.ndarray) -> np.n
     """Cadence (steps/s) around each step: 1 / the median duration of the ``CADENCE_WINDOW_STEPS`` steps centred on
     it, within its run of consecutive steps (a step starting where the previous one ended)."""
     start, end = np.asarray(step_start_s, float), np.asarray(step_end_s, float)
-    if len(start) == 0:
-        return np.empty(0)
+    dur = end - start
+    out = np.empty(len(dur))
     run = np.cumsum(np.r_[True, start[1:] != end[:-1]])
     half = CADENCE_WINDOW_STEPS // 2
-    k = np.arange(len(start))[:, None] + np.arange(-half, half + 1)[None, :]
-    inside = (k >= 0) & (k < len(start))
-    k = np.clip(k, 0, len(start) - 1)
-    same_run = inside & (run[k] == run[:, None])
-    return 1.0 / np.nanmedian(np.where(same_run, (end - start)[k], np.nan), axis=1)
+    for r in np.unique(run):
+        idx = np.flatnonzero(run == r)
+        d = dur[idx]
+        out[idx] = [1.0 / np.median(d[max(0, i - half):i + half + 1]) for i in range(len(idx))]
+    return out
 
 
 def velocity_highpass_hz(step_freq_hz: np.ndarray) -> np.ndarray:

@@ -371,9 +371,7 @@ class ZijlstraStepLength(StepLengthModel):
     over a step (``vertical_excursion_m``, from double-integrating the vertical acceleration between contacts, see
     :func:`pdr.step_length.features.vertical_excursion_m`) gives the step length. Zijlstra & Hof's correction was
     1.25; mobgap's ``SlZijlstra`` (Soltani et al. 2021) uses 4.587/4 (MS patients) and 4.739/4 = 1.185 (all
-    participants of the MsProject set); the preset takes 1.185. Those K were fitted with the drift-removal
-    high-pass at 1 Hz; here it is 1 Hz at the reference cadence and scales with the walker's
-    (:func:`pdr.step_length.features.velocity_highpass_hz`), so K means the same at every cadence.
+    participants of the MsProject set); the preset takes 1.185.
 
     Example
     -------
