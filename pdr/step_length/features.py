@@ -22,7 +22,7 @@ import numpy as np
 import pandas as pd
 from scipy.signal import butter, sosfiltfilt
 
-from pdr.constants import GRAVITY_MPS2, REFERENCE_CADENCE_HZ
+from pdr.constants import GRAVITY_MPS2
 from pdr.errors import InputError, warn
 from pdr.io.recording import Recording
 from pdr.schema import require_table
@@ -32,9 +32,7 @@ SIGNAL_FEATURES = ("acc_range_mps2", "acc_abs_mean_mps2", "vertical_excursion_m"
 DEFAULT_STEP_S = 1.0 / 1.8  # duration assumed for a lone step (typical cadence 108 steps/min)
 GRAVITY_LOWPASS_HZ = 0.3  # the specific force below this is gravity (walking is at 1.4-2.5 Hz)
 ACC_HIGHPASS_HZ = 0.1  # before the first integration (Zijlstra & Hof 2003, as in mobgap's SlZijlstra)
-VEL_HIGHPASS_HZ = 1.0  # drift removal before the second integration (idem), at REFERENCE_CADENCE_HZ (see below)
-CADENCE_WINDOW_STEPS = 5  # a step's cadence: the median over it and two neighbours each side (two strides)
-CUTOFF_BIN = 0.02  # cutoffs within 2% share one filtering (changes h by < 0.1% at a normal cadence)
+VEL_HIGHPASS_HZ = 1.0  # drift removal before the second integration (idem)
 MIN_RATE_HZ = 10.0
 
 
@@ -74,63 +72,30 @@ def vertical_acceleration(u: UniformImu) -> tuple[np.ndarray, np.ndarray, float]
     return u.t_s, np.einsum("ij,ij->i", a, up) - GRAVITY_MPS2, rate
 
 
-def local_step_freq_hz(step_start_s: np.ndarray, step_end_s: np.ndarray) -> np.ndarray:
-    """Cadence (steps/s) around each step: 1 / the median duration of the ``CADENCE_WINDOW_STEPS`` steps centred on
-    it, within its run of consecutive steps (a step starting where the previous one ended)."""
-    start, end = np.asarray(step_start_s, float), np.asarray(step_end_s, float)
-    dur = end - start
-    out = np.empty(len(dur))
-    run = np.cumsum(np.r_[True, start[1:] != end[:-1]])
-    half = CADENCE_WINDOW_STEPS // 2
-    for r in np.unique(run):
-        idx = np.flatnonzero(run == r)
-        d = dur[idx]
-        out[idx] = [1.0 / np.median(d[max(0, i - half):i + half + 1]) for i in range(len(idx))]
-    return out
-
-
-def velocity_highpass_hz(step_freq_hz: np.ndarray) -> np.ndarray:
-    """Cutoff of the velocity high-pass for walkers at ``step_freq_hz``: ``VEL_HIGHPASS_HZ`` scaled by the cadence.
-
-    The high-pass cuts into the gait band: zero-phase (forward and backward, squaring the gain), a 4th-order
-    Butterworth passes |H(f)|^2 = 1 / (1 + (f_c / f)^8) of a component at f, 0.992 of the step-frequency bounce at
-    the reference cadence (1.83 steps/s) but 0.88 at 1.28 and 0.50 at 1.0 steps/s, so the pelvis rise, and the
-    pendulum's step length with it, would fall with the cadence alone. With f_c proportional to the cadence the
-    filter is the same in units of the gait cycle: every harmonic of the bounce (and the stride's left-right
-    component) keeps the same fraction at every cadence, and at ``REFERENCE_CADENCE_HZ`` the filter is Zijlstra &
-    Hof's and mobgap's 1 Hz, on which the pendulum's K (Soltani et al. 2021) was fitted, so K keeps its meaning."""
-    return VEL_HIGHPASS_HZ * np.asarray(step_freq_hz, float) / REFERENCE_CADENCE_HZ
-
-
 def vertical_excursion_m(acc_vertical_mps2: np.ndarray, rate_hz: float, t0_s: float,
                          step_start_s: np.ndarray, step_end_s: np.ndarray) -> np.ndarray:
     """Vertical excursion (m) of the sensor over each step: peak-to-peak of the double-integrated vertical acceleration.
 
     Zijlstra & Hof (2003): high-pass the vertical acceleration (0.1 Hz), integrate to velocity, high-pass
-    again to remove drift, integrate to position; the excursion of a step is max - min over it. The second
-    high-pass is 1 Hz at the reference cadence and scales with the walker's cadence around each step
-    (:func:`velocity_highpass_hz`, :func:`local_step_freq_hz`), so the excursion read from the same bounce does not
-    depend on how fast it repeats. Filters are zero-phase (offline). ``acc_vertical_mps2`` is uniformly sampled
-    from ``t0_s`` at ``rate_hz``. Steps outside the signal get NaN.
+    again (1 Hz) to remove drift, integrate to position; the excursion of a step is max - min over it.
+    Filters are zero-phase (offline). ``acc_vertical_mps2`` is uniformly sampled from ``t0_s`` at ``rate_hz``.
+    Steps outside the signal get NaN.
     """
     a = np.asarray(acc_vertical_mps2, float)
     n = len(a)
     out = np.full(len(step_start_s), np.nan)
-    if n < 2 or len(step_start_s) == 0:
+    if n < 2:
         return out
     pad = min(n - 1, int(3 * rate_hz / ACC_HIGHPASS_HZ))
     a = sosfiltfilt(butter(4, ACC_HIGHPASS_HZ, "highpass", fs=rate_hz, output="sos"), a, padlen=pad)
     v = np.cumsum(a) / rate_hz
+    v = sosfiltfilt(butter(4, VEL_HIGHPASS_HZ, "highpass", fs=rate_hz, output="sos"), v, padlen=pad)
+    z = np.cumsum(v) / rate_hz
     i0 = np.round((np.asarray(step_start_s, float) - t0_s) * rate_hz).astype(int)
     i1 = np.round((np.asarray(step_end_s, float) - t0_s) * rate_hz).astype(int)
-    inside = (i0 >= 0) & (i1 < n) & (i1 > i0)
-    cutoff = velocity_highpass_hz(local_step_freq_hz(step_start_s, step_end_s))
-    cutoff_bin = np.round(np.log(cutoff) / CUTOFF_BIN)
-    for b in np.unique(cutoff_bin[inside]):
-        fc = float(np.exp(b * CUTOFF_BIN))
-        z = np.cumsum(sosfiltfilt(butter(4, fc, "highpass", fs=rate_hz, output="sos"), v, padlen=pad)) / rate_hz
-        for k in np.flatnonzero(inside & (cutoff_bin == b)):
-            seg = z[i0[k]:i1[k] + 1]
+    for k, (s, e) in enumerate(zip(i0, i1)):
+        if s >= 0 and e < n and e > s:
+            seg = z[s:e + 1]
             out[k] = seg.max() - seg.min()
     return out
 
