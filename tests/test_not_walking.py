@@ -80,13 +80,20 @@ def test_vehicle_and_bicycle_stretches_have_no_steps_and_a_warning(tmp_path, kin
     json.loads((tmp_path / "out" / "summary.json").read_text())
 
 
-def test_five_hz_recording_follows_the_gnss_and_says_why(tmp_path, capsys):
+def _five_hz_walk(duration_s: float, seed: int):
+    """A 1.3 m/s walk whose IMU is averaged down from 100 Hz to 5 Hz (the mean of each 0.2 s, as a phone's low-rate
+    sensor delivers it)."""
     sc = _scenario()
-    sc["segment"] = [{"duration_s": 180.0, "speed_mps": 1.3}]
-    rec = simulate(sc, seed=2)
-    block = 20  # 100 Hz -> 5 Hz: the mean of each 0.2 s, as a phone's low-rate sensor delivers it
+    sc["segment"] = [{"duration_s": duration_s, "speed_mps": 1.3}]
+    rec = simulate(sc, seed=seed)
+    block = 20
     imu = rec.imu.iloc[: len(rec.imu) // block * block]
     rec.imu = imu.groupby(np.arange(len(imu)) // block).mean().reset_index(drop=True)
+    return rec
+
+
+def test_five_hz_recording_follows_the_gnss_and_says_why(tmp_path, capsys):
+    rec = _five_hz_walk(180.0, seed=2)
     path = save_recording(rec, tmp_path / "rec")
     with collect_warnings() as caught:
         summary = run_recording(path, tmp_path / "out")
@@ -135,12 +142,7 @@ def _sensor_logger_export(rec, folder, epoch_ns: int = 1717236000000000000) -> N
 def test_five_hz_sensor_logger_export_follows_the_gnss_and_says_why(tmp_path, capsys):
     """The issue's case from the user's side: a Sensor Logger export whose motion sensors ran at 5 Hz imports,
     validates with the rate warning, and runs on the GNSS alone, saying why there are no steps."""
-    sc = _scenario()
-    sc["segment"] = [{"duration_s": 120.0, "speed_mps": 1.3}]
-    rec = simulate(sc, seed=4)
-    block = 20  # 100 Hz -> 5 Hz: the mean of each 0.2 s, as a phone's low-rate sensor delivers it
-    imu = rec.imu.iloc[: len(rec.imu) // block * block]
-    rec.imu = imu.groupby(np.arange(len(imu)) // block).mean().reset_index(drop=True)
+    rec = _five_hz_walk(120.0, seed=4)
     _sensor_logger_export(rec, tmp_path / "export")
     assert not (tmp_path / "export" / "Metadata.csv").read_bytes().endswith(b"\n")
     assert main(["import", "sensorlogger", str(tmp_path / "export"), str(tmp_path / "recs")]) == 0
