@@ -3,8 +3,9 @@
 The steps table (CONTRACT.md) carries ``step_freq_hz`` and ``acc_var_m2ps4``, enough for the regression model.
 Weinberg needs the range of the vertical acceleration over the step, Kim the mean absolute dynamic acceleration,
 and Zijlstra's inverted pendulum the vertical excursion of the centre of mass. These are computed here from the
-recording's main IMU (on its uniform grid, :func:`pdr.signals.uniform_imu`) and the step instants, orientation-free: the vertical is the direction of the low-passed
-specific force (gravity), so a waist belt, a phone in a pocket or a hand all work.
+recording's main IMU (on its uniform grid, :func:`pdr.signals.uniform_imu`) and the step instants,
+orientation-free: the vertical is the direction of the low-passed specific force (gravity), so a waist belt, a
+phone in a pocket or a hand all work.
 
 A step (row ``k``) is the interval from the previous foot contact of its bout to its own contact ``t_s[k]``; the
 first step of a bout has no previous contact, so it takes the interval of the bout's median step duration before it.

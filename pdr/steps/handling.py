@@ -55,8 +55,8 @@ class AttitudeHandlingDetection(Algorithm):
     Notes
     -----
     Needs only the accelerometer, so it works on every phone export; a gyroscope, where there is one, times the
-    intervals to the sample (instead of to a quarter window) and measures their turn outside the move. A turn alone is not proof of
-    handling (an armband can turn by 30° over a few strides of steady walking): the step detector leaves out only
+    intervals to the sample (instead of to a quarter window) and measures their turn outside the move. A turn alone
+    is not proof of handling (an armband can turn by 30° over a few strides of steady walking): the step detector leaves out only
     the handling outside the core of a walking bout (:func:`pdr.steps.gait.core_walking`), where the acceleration is
     not gait-periodic.
 

@@ -317,8 +317,8 @@ class WaveletStepDetection(Algorithm):
         """``t`` without the maxima inside the handling intervals at an edge of the bout ``[a, b)``: no walking
         (``walking``: windows found gait-periodic, their centres more than ``reach`` samples from the interval)
         between the interval and the bout's start, or between it and the bout's end. There the walker starts or
-        stops, and the acceleration is the hand's. Handling with walking on both sides (the phone taken out while walking on) keeps its steps. Also returns the intervals that lost
-        maxima: ``(t_start_s, t_end_s, n_maxima)``."""
+        stops, and the acceleration is the hand's. Handling with walking on both sides (the phone taken out while
+        walking on) keeps its steps. Also returns the intervals that lost maxima: ``(t_start_s, t_end_s, n_maxima)``."""
         k = np.clip(np.round((t - u.t_s[0]) * u.rate_hz).astype(int), 0, len(u) - 1)
         keep = np.ones(len(t), bool)
         dropped = []
