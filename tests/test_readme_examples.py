@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from docs.readme_examples import README, check, parse
+from docs.readme_examples import README, check, parse, same_line
 
 
 def test_a_drifted_example_is_caught_and_updated(tmp_path):
@@ -12,6 +12,16 @@ def test_a_drifted_example_is_caught_and_updated(tmp_path):
     assert "-three" in diff and "+two" in diff
     check(readme, update=True)
     assert check(readme) == [] and "one\ntwo\n```" in readme.read_text()
+
+
+def test_numbers_match_within_the_solvers_tolerance_text_and_integers_exactly():
+    assert same_line('  "final_error_m": 0.80884,', '  "final_error_m": 0.8087587,')  # another CPU's kernels
+    assert same_line("distance -0.4472418", "distance -0.4472415")
+    assert not same_line('  "final_error_m": 0.80884,', '  "final_error_m": 0.8121,')  # 0.4%: a change
+    assert not same_line("79 steps, 49.8 m", "80 steps, 49.8 m")  # integers exactly
+    assert not same_line("79 steps, 49.8 m", "79 steps, 49.9 m")  # 0.2%
+    assert same_line("79 steps, 49.8 m", "79 steps, 49.84 m")  # within half a unit of the last digit shown
+    assert not same_line("graph fusion", "batch fusion")
 
 
 def test_readme_examples_print_what_the_readme_shows():
