@@ -38,7 +38,8 @@ class AdaptiveKalmanCalibration(Algorithm):
         (:func:`pdr.calibration.segments.clean_fixes`; 0 s = no smoothing).
     adapt_gnss_noise : scale the GNSS part of the measurement noise to the residuals of a first fit (see Notes).
     level_drift_std_m : standard deviation per step of the random walk of the model's level (m of step length);
-        None: estimated from the segments (see Notes). Default 0 (a steady level), chosen on the simulated tuning
+        None or ``"estimate"`` (the spelling a TOML ``[calibration]`` section can give): estimated from the segments
+        (see Notes). Default 0 (a steady level), chosen on the simulated tuning
         people (1.75 m, seeds 0-1, waist and hand, calibrated on known distances, the rest of the walk predicted:
         mean error 1.8% with 0, 2.0% estimated, 2.1% with 2 mm, 3.9% with 5 mm per step).
 
@@ -81,7 +82,7 @@ class AdaptiveKalmanCalibration(Algorithm):
     therefore follows a random walk of ``level_drift_std_m`` per step, and the model returned is its state at the end
     of the data (what follows), not the mean over them; with no drift this is the plain Bayesian fit. The drift is
     estimated from the differences between the segments (restricted maximum likelihood) with
-    ``level_drift_std_m=None``: the data must show it against their own noise (on steady simulated walkers it mostly
+    ``level_drift_std_m=None`` (``"estimate"``): the data must show it against their own noise (on steady simulated walkers it mostly
     comes out 0, but a change of pace that the model's cadence law does not follow exactly can pass for a drift).
 
     Example
@@ -97,7 +98,7 @@ class AdaptiveKalmanCalibration(Algorithm):
                  min_straightness: float = 0.7, min_step_m: float = 0.2, max_step_m: float = 1.6,
                  min_freq_spread_hz: float = 0.1, outlier_h_acc_factor: float = 5.0, gnss_smoothing_s: float = 2.0,
                  adapt_gnss_noise: bool = True, model_segment_steps: float = 60.0,
-                 level_drift_std_m: float | None = 0.0):
+                 level_drift_std_m: float | str | None = 0.0):
         self.measurement_std_m = measurement_std_m
         self.process_std_init_m = process_std_init_m
         self.process_std_min_m = process_std_min_m
@@ -128,9 +129,10 @@ class AdaptiveKalmanCalibration(Algorithm):
         if not isinstance(self.innovation_window, int) or self.innovation_window < 1:
             raise InputError(f"AdaptiveKalmanCalibration: expected innovation_window a positive integer, found {self.innovation_window!r}")
         d = self.level_drift_std_m
-        if d is not None and (not isinstance(d, (int, float)) or isinstance(d, bool) or not np.isfinite(d) or d < 0):
-            raise InputError(f"AdaptiveKalmanCalibration: expected level_drift_std_m None or a number >= 0 (m per step), "
-                             f"found {d!r}")
+        if not self._drift_estimated() and (not isinstance(d, (int, float)) or isinstance(d, bool) or not np.isfinite(d)
+                                            or d < 0):
+            raise InputError(f"AdaptiveKalmanCalibration: expected level_drift_std_m a number >= 0 (m per step), or "
+                             f"\"estimate\" (or None) to estimate it, found {d!r}")
         if not 0 <= self.min_straightness <= 1:
             raise InputError(f"AdaptiveKalmanCalibration: expected min_straightness in [0, 1], found {self.min_straightness!r}")
 
@@ -192,6 +194,10 @@ class AdaptiveKalmanCalibration(Algorithm):
         mid = offset[segs["rec_index"].to_numpy(int)] + 0.5 * (segs["k_first"].to_numpy(float) + segs["k_last"].to_numpy(float))
         self.model_, self.updated_ = self._update_model(model, design[used], segs, steps_to_end=offset[-1] - mid)
         return self
+
+    def _drift_estimated(self) -> bool:
+        """Whether the level's drift is estimated from the segments (``level_drift_std_m`` None or "estimate")."""
+        return self.level_drift_std_m is None or self.level_drift_std_m == "estimate"
 
     def _segments(self, prepared: list, gnss_list: list, known: list,
                   segment_steps: float) -> tuple[pd.DataFrame, np.ndarray]:
@@ -344,7 +350,7 @@ class AdaptiveKalmanCalibration(Algorithm):
         drift."""
         g = level_design / np.mean(level_design)
         shape = np.outer(g, g) * np.minimum.outer(steps_to_end, steps_to_end)
-        if self.level_drift_std_m is not None:
+        if not self._drift_estimated():
             return self.level_drift_std_m ** 2 * shape, float(self.level_drift_std_m)
         best, best_ll = 0.0, -np.inf
         for q_std in (0.0, *np.geomspace(2e-4, 0.02, 21)):
