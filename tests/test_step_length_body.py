@@ -167,6 +167,22 @@ def test_calibration_follows_a_drifting_level_and_keeps_a_steady_one():
             AdaptiveKalmanCalibration(level_drift_std_m=bad).fit(steps, None, prior, distances=table)
 
 
+def test_running_does_not_calibrate_a_walking_model():
+    freq = np.repeat([1.8, 2.8], 200)  # walking at 0.75 m x 1.8/s = 1.35 m/s, then running at 1.0 m x 2.8/s = 2.8 m/s
+    steps = _steps(freq, 3)
+    length = np.where(freq < 2.5, 0.75, 1.0)
+    table = _leg_distances(steps, length, 20, 0.05, 3)
+    akf = AdaptiveKalmanCalibration().fit(steps, None, RegressionStepLength.population(), {"height_m": 1.75},
+                                          distances=table)
+    segs = akf.model_segments_
+    running = segs["freq_hz"] > 2.5
+    assert running.any() and not segs.loc[running, "used"].any() and segs.loc[~running, "used"].all()
+    assert segs.loc[running, "reason"].str.startswith("running").all()
+    walking = AdaptiveKalmanCalibration().fit(steps, None, RegressionStepLength.population(), {"height_m": 1.75},
+                                              distances=table[~running.to_numpy()].reset_index(drop=True))
+    assert np.allclose(akf.model_.theta, walking.model_.theta)  # the run adds nothing to the walking model
+
+
 # ------------------------------------------------------------------------------------------------ known distances
 def test_a_walk_of_known_length_sets_the_level_and_scales_with_it():
     freq = np.full(300, 1.8)

@@ -11,8 +11,10 @@ from pdr.base import Algorithm
 from pdr.calibration.segments import distance_segments, gnss_segments
 from pdr.errors import InputError, collect_warnings, warn
 from pdr.fusion._linear import bounded_map
-from pdr.step_length.models import StepLengthModel
+from pdr.constants import GRAVITY_MPS2
+from pdr.step_length.models import LEG_LENGTH_PER_HEIGHT, POPULATION_HEIGHT_M, StepLengthModel
 
+WALK_RUN_FROUDE = 0.5  # the walk-run transition (Alexander 1989); faster segments do not calibrate a walking model
 TRACE_COLUMNS = ("rec_index", "t_s", "model_step_m", "step_length_m", "step_length_std_m", "process_std_m")
 
 
@@ -50,7 +52,8 @@ class AdaptiveKalmanCalibration(Algorithm):
         its prior), or ``"none"`` (no usable segment, model unchanged).
     segments_ : every candidate GNSS segment of the filter (``gnss_segments`` columns + ``rec_index``,
         ``measured_std_m``, ``model_step_m``, ``innovation_m``, ``freq_hz``), with ``used`` and the rejection ``reason``.
-    model_segments_ : the same for the (longer) segments of the model fit.
+    model_segments_ : the same for the (longer) segments of the model fit; those walked faster than the walk-run
+        transition are not used (reason ``running``: the step models are walking models, :data:`WALK_RUN_FROUDE`).
     trace_ : per step, the filter's course: ``rec_index, t_s, model_step_m`` (uncalibrated prediction),
         ``step_length_m`` / ``step_length_std_m`` (filtered), ``process_std_m`` (adapted).
     step_length_m_, step_length_std_m_ : the filtered step length per step (all recordings, in order).
@@ -159,6 +162,7 @@ class AdaptiveKalmanCalibration(Algorithm):
             prepared.append((st, x, np.clip(x @ model.theta, 0.0, None)))
         filt_segs, _ = self._segments(prepared, gnss_list, known, self.segment_steps)
         model_segs, design = self._segments(prepared, gnss_list, known, self.model_segment_steps)
+        _reject_running(model_segs, subjects)
         used = model_segs["used"].to_numpy(bool)
         from_gnss = used & ~np.isfinite(model_segs["distance_std_m"].to_numpy(float))
         # measurement noise: 5 cm plus the GNSS part, scaled to the residuals of a first fit (consecutive fixes share
@@ -365,6 +369,27 @@ class AdaptiveKalmanCalibration(Algorithm):
             if ll > best_ll + 1e-9:
                 best, best_ll = float(q_std), ll
         return best ** 2 * shape, best
+
+
+def _reject_running(segs: pd.DataFrame, subjects: list[dict | None]) -> None:
+    """Mark the segments walked faster than the walk-run transition as not used for the model's parameters: the
+    step models are walking models (the inverted pendulum does not hold in running, whose steps it reads ~18% short
+    on the simulated 2.8 m/s runs). The transition is Froude number v^2 / (g l) = 0.5 (Alexander 1989, "Optimization
+    and gaits in the locomotion of vertebrates"), l the leg length: the subject's ``leg_length_m``, else 0.53 x its
+    ``height_m``, else of the population height (2.1 m/s at 1.70 m)."""
+    if len(segs) == 0:
+        return
+    legs = []
+    for subj in subjects:
+        subj = subj or {}
+        leg = subj.get("leg_length_m")
+        legs.append(float(leg) if leg is not None else LEG_LENGTH_PER_HEIGHT * float(subj.get("height_m") or POPULATION_HEIGHT_M))
+    v_run = np.sqrt(WALK_RUN_FROUDE * GRAVITY_MPS2 * np.asarray(legs)[segs["rec_index"].to_numpy(int)])
+    speed = segs["measured_step_m"] * segs["n_steps"] / (segs["t_end_s"] - segs["t_start_s"])
+    running = segs["used"].to_numpy(bool) & (speed > v_run).to_numpy(bool)
+    segs.loc[running, "used"] = False
+    segs.loc[running, "reason"] = [f"running ({v:.2f} m/s > {r:.2f} m/s, Froude {WALK_RUN_FROUDE:g})"
+                                   for v, r in zip(speed[running], v_run[running])]
 
 
 _NO_GNSS = pd.DataFrame({"t_s": pd.Series(dtype=float), "e_m": pd.Series(dtype=float), "n_m": pd.Series(dtype=float)})
