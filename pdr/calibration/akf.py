@@ -85,8 +85,9 @@ class AdaptiveKalmanCalibration(Algorithm):
     therefore follows a random walk of ``level_drift_std_m`` per step, and the model returned is its state at the end
     of the data (what follows), not the mean over them; with no drift this is the plain Bayesian fit. The drift is
     estimated from the differences between the segments (restricted maximum likelihood) with
-    ``level_drift_std_m=None`` (``"estimate"``): the data must show it against their own noise (on steady simulated walkers it mostly
-    comes out 0, but a change of pace that the model's cadence law does not follow exactly can pass for a drift).
+    ``level_drift_std_m=None`` (``"estimate"``): the data must show it against their own noise (on steady simulated
+    walkers it mostly comes out 0, but a change of pace that the model's cadence law does not follow exactly can pass
+    for a drift).
 
     Example
     -------
