@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import re
+import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -157,8 +158,29 @@ def test_calibration_follows_a_drifting_level_and_keeps_a_steady_one():
     last = {m: float(m.estimate(steps.iloc[-1:]).step_length_m_[0]) for m in (akf.model_, static.model_)}
     assert akf.level_drift_std_m_ > 0
     assert abs(last[akf.model_] - 0.70) < 0.02 and abs(last[static.model_] - 0.775) < 0.02  # the end, not the mean
-    with pytest.raises(InputError, match="level_drift_std_m"):
-        AdaptiveKalmanCalibration(level_drift_std_m=-1.0).fit(steps, None, prior, distances=table)
+    # a TOML [calibration] section has no None: "estimate" asks for the same
+    toml = AdaptiveKalmanCalibration.from_config(tomllib.loads('level_drift_std_m = "estimate"')).fit(
+        steps, None, prior, distances=table)
+    assert toml.level_drift_std_m_ == akf.level_drift_std_m_ and np.allclose(toml.model_.theta, akf.model_.theta)
+    for bad in (-1.0, "auto"):
+        with pytest.raises(InputError, match="level_drift_std_m"):
+            AdaptiveKalmanCalibration(level_drift_std_m=bad).fit(steps, None, prior, distances=table)
+
+
+def test_running_does_not_calibrate_a_walking_model():
+    freq = np.repeat([1.8, 2.8], 200)  # walking at 0.75 m x 1.8/s = 1.35 m/s, then running at 1.0 m x 2.8/s = 2.8 m/s
+    steps = _steps(freq, 3)
+    length = np.where(freq < 2.5, 0.75, 1.0)
+    table = _leg_distances(steps, length, 20, 0.05, 3)
+    akf = AdaptiveKalmanCalibration().fit(steps, None, RegressionStepLength.population(), {"height_m": 1.75},
+                                          distances=table)
+    segs = akf.model_segments_
+    running = segs["freq_hz"] > 2.5
+    assert running.any() and not segs.loc[running, "used"].any() and segs.loc[~running, "used"].all()
+    assert segs.loc[running, "reason"].str.startswith("running").all()
+    walking = AdaptiveKalmanCalibration().fit(steps, None, RegressionStepLength.population(), {"height_m": 1.75},
+                                              distances=table[~running.to_numpy()].reset_index(drop=True))
+    assert np.allclose(akf.model_.theta, walking.model_.theta)  # the run adds nothing to the walking model
 
 
 # ------------------------------------------------------------------------------------------------ known distances

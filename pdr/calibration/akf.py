@@ -11,8 +11,10 @@ from pdr.base import Algorithm
 from pdr.calibration.segments import distance_segments, gnss_segments
 from pdr.errors import InputError, collect_warnings, warn
 from pdr.fusion._linear import bounded_map
-from pdr.step_length.models import StepLengthModel
+from pdr.constants import GRAVITY_MPS2
+from pdr.step_length.models import LEG_LENGTH_PER_HEIGHT, POPULATION_HEIGHT_M, StepLengthModel
 
+WALK_RUN_FROUDE = 0.5  # the walk-run transition (Alexander 1989); faster segments do not calibrate a walking model
 TRACE_COLUMNS = ("rec_index", "t_s", "model_step_m", "step_length_m", "step_length_std_m", "process_std_m")
 
 
@@ -38,7 +40,8 @@ class AdaptiveKalmanCalibration(Algorithm):
         (:func:`pdr.calibration.segments.clean_fixes`; 0 s = no smoothing).
     adapt_gnss_noise : scale the GNSS part of the measurement noise to the residuals of a first fit (see Notes).
     level_drift_std_m : standard deviation per step of the random walk of the model's level (m of step length);
-        None: estimated from the segments (see Notes). Default 0 (a steady level), chosen on the simulated tuning
+        None or ``"estimate"`` (the spelling a TOML ``[calibration]`` section can give): estimated from the segments
+        (see Notes). Default 0 (a steady level), chosen on the simulated tuning
         people (1.75 m, seeds 0-1, waist and hand, calibrated on known distances, the rest of the walk predicted:
         mean error 1.8% with 0, 2.0% estimated, 2.1% with 2 mm, 3.9% with 5 mm per step).
 
@@ -49,7 +52,8 @@ class AdaptiveKalmanCalibration(Algorithm):
         its prior), or ``"none"`` (no usable segment, model unchanged).
     segments_ : every candidate GNSS segment of the filter (``gnss_segments`` columns + ``rec_index``,
         ``measured_std_m``, ``model_step_m``, ``innovation_m``, ``freq_hz``), with ``used`` and the rejection ``reason``.
-    model_segments_ : the same for the (longer) segments of the model fit.
+    model_segments_ : the same for the (longer) segments of the model fit; those walked faster than the walk-run
+        transition are not used (reason ``running``: the step models are walking models, :data:`WALK_RUN_FROUDE`).
     trace_ : per step, the filter's course: ``rec_index, t_s, model_step_m`` (uncalibrated prediction),
         ``step_length_m`` / ``step_length_std_m`` (filtered), ``process_std_m`` (adapted).
     step_length_m_, step_length_std_m_ : the filtered step length per step (all recordings, in order).
@@ -81,8 +85,9 @@ class AdaptiveKalmanCalibration(Algorithm):
     therefore follows a random walk of ``level_drift_std_m`` per step, and the model returned is its state at the end
     of the data (what follows), not the mean over them; with no drift this is the plain Bayesian fit. The drift is
     estimated from the differences between the segments (restricted maximum likelihood) with
-    ``level_drift_std_m=None``: the data must show it against their own noise (on steady simulated walkers it mostly
-    comes out 0, but a change of pace that the model's cadence law does not follow exactly can pass for a drift).
+    ``level_drift_std_m=None`` (``"estimate"``): the data must show it against their own noise (on steady simulated
+    walkers it mostly comes out 0, but a change of pace that the model's cadence law does not follow exactly can pass
+    for a drift).
 
     Example
     -------
@@ -97,7 +102,7 @@ class AdaptiveKalmanCalibration(Algorithm):
                  min_straightness: float = 0.7, min_step_m: float = 0.2, max_step_m: float = 1.6,
                  min_freq_spread_hz: float = 0.1, outlier_h_acc_factor: float = 5.0, gnss_smoothing_s: float = 2.0,
                  adapt_gnss_noise: bool = True, model_segment_steps: float = 60.0,
-                 level_drift_std_m: float | None = 0.0):
+                 level_drift_std_m: float | str | None = 0.0):
         self.measurement_std_m = measurement_std_m
         self.process_std_init_m = process_std_init_m
         self.process_std_min_m = process_std_min_m
@@ -128,9 +133,10 @@ class AdaptiveKalmanCalibration(Algorithm):
         if not isinstance(self.innovation_window, int) or self.innovation_window < 1:
             raise InputError(f"AdaptiveKalmanCalibration: expected innovation_window a positive integer, found {self.innovation_window!r}")
         d = self.level_drift_std_m
-        if d is not None and (not isinstance(d, (int, float)) or isinstance(d, bool) or not np.isfinite(d) or d < 0):
-            raise InputError(f"AdaptiveKalmanCalibration: expected level_drift_std_m None or a number >= 0 (m per step), "
-                             f"found {d!r}")
+        if not self._drift_estimated() and (not isinstance(d, (int, float)) or isinstance(d, bool) or not np.isfinite(d)
+                                            or d < 0):
+            raise InputError(f"AdaptiveKalmanCalibration: expected level_drift_std_m a number >= 0 (m per step), or "
+                             f"\"estimate\" (or None) to estimate it, found {d!r}")
         if not 0 <= self.min_straightness <= 1:
             raise InputError(f"AdaptiveKalmanCalibration: expected min_straightness in [0, 1], found {self.min_straightness!r}")
 
@@ -157,6 +163,7 @@ class AdaptiveKalmanCalibration(Algorithm):
             prepared.append((st, x, np.clip(x @ model.theta, 0.0, None)))
         filt_segs, _ = self._segments(prepared, gnss_list, known, self.segment_steps)
         model_segs, design = self._segments(prepared, gnss_list, known, self.model_segment_steps)
+        _reject_running(model_segs, subjects)
         used = model_segs["used"].to_numpy(bool)
         from_gnss = used & ~np.isfinite(model_segs["distance_std_m"].to_numpy(float))
         # measurement noise: 5 cm plus the GNSS part, scaled to the residuals of a first fit (consecutive fixes share
@@ -192,6 +199,10 @@ class AdaptiveKalmanCalibration(Algorithm):
         mid = offset[segs["rec_index"].to_numpy(int)] + 0.5 * (segs["k_first"].to_numpy(float) + segs["k_last"].to_numpy(float))
         self.model_, self.updated_ = self._update_model(model, design[used], segs, steps_to_end=offset[-1] - mid)
         return self
+
+    def _drift_estimated(self) -> bool:
+        """Whether the level's drift is estimated from the segments (``level_drift_std_m`` None or "estimate")."""
+        return self.level_drift_std_m is None or self.level_drift_std_m == "estimate"
 
     def _segments(self, prepared: list, gnss_list: list, known: list,
                   segment_steps: float) -> tuple[pd.DataFrame, np.ndarray]:
@@ -344,7 +355,7 @@ class AdaptiveKalmanCalibration(Algorithm):
         drift."""
         g = level_design / np.mean(level_design)
         shape = np.outer(g, g) * np.minimum.outer(steps_to_end, steps_to_end)
-        if self.level_drift_std_m is not None:
+        if not self._drift_estimated():
             return self.level_drift_std_m ** 2 * shape, float(self.level_drift_std_m)
         best, best_ll = 0.0, -np.inf
         for q_std in (0.0, *np.geomspace(2e-4, 0.02, 21)):
@@ -359,6 +370,27 @@ class AdaptiveKalmanCalibration(Algorithm):
             if ll > best_ll + 1e-9:
                 best, best_ll = float(q_std), ll
         return best ** 2 * shape, best
+
+
+def _reject_running(segs: pd.DataFrame, subjects: list[dict | None]) -> None:
+    """Mark the segments walked faster than the walk-run transition as not used for the model's parameters: the
+    step models are walking models (the inverted pendulum does not hold in running, whose steps it reads ~18% short
+    on the simulated 2.8 m/s runs). The transition is Froude number v^2 / (g l) = 0.5 (Alexander 1989, "Optimization
+    and gaits in the locomotion of vertebrates"), l the leg length: the subject's ``leg_length_m``, else 0.53 x its
+    ``height_m``, else of the population height (2.1 m/s at 1.70 m)."""
+    if len(segs) == 0:
+        return
+    legs = []
+    for subj in subjects:
+        subj = subj or {}
+        leg = subj.get("leg_length_m")
+        legs.append(float(leg) if leg is not None else LEG_LENGTH_PER_HEIGHT * float(subj.get("height_m") or POPULATION_HEIGHT_M))
+    v_run = np.sqrt(WALK_RUN_FROUDE * GRAVITY_MPS2 * np.asarray(legs)[segs["rec_index"].to_numpy(int)])
+    speed = segs["measured_step_m"] * segs["n_steps"] / (segs["t_end_s"] - segs["t_start_s"])
+    running = segs["used"].to_numpy(bool) & (speed > v_run).to_numpy(bool)
+    segs.loc[running, "used"] = False
+    segs.loc[running, "reason"] = [f"running ({v:.2f} m/s > {r:.2f} m/s, Froude {WALK_RUN_FROUDE:g})"
+                                   for v, r in zip(speed[running], v_run[running])]
 
 
 _NO_GNSS = pd.DataFrame({"t_s": pd.Series(dtype=float), "e_m": pd.Series(dtype=float), "n_m": pd.Series(dtype=float)})
