@@ -185,7 +185,7 @@ def _matched(est, kin, side="left", t_range=None) -> tuple[np.ndarray, int]:
 def _true_geometry_errors(kin, cam, flow, t_range) -> np.ndarray:
     """Relative errors of strides read from the measured flow with the walk's true camera geometry: s = (1/f) x
     the integral of F h / cos^2(theta) over the stride (h the camera height, theta the optical axis from the
-    vertical; exact for the flow at the image centre over a flat floor). What is left is the flow's own error,
+    vertical; exact for the flow at the image centre in the sagittal plane over a flat floor). What is left is the flow's own error,
     the bound of any model of the camera geometry."""
     t = flow.t_s.to_numpy()
     f = forward_flow(flow)
