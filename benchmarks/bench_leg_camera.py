@@ -9,7 +9,8 @@ failure threshold and the sigma floor were chosen) and a test group of other peo
 proportion (Bogin & Varela-Silva 2010) and step-length law (``GaitUser``; healthy and older cohorts), at three speeds,
 on two real floors, with two camera set-ups. The estimator is given what a user knows: the height and the leg length
 tape-measured (+-1 cm), the camera's mount distance below the knee measured (+-0.5 cm), the camera intrinsics; the
-segment lengths come from Winter's ratios (``SlipBody.from_user``).
+segment lengths come from Winter's ratios (``SlipBody.from_user``). Each group also reports its strides read from the
+measured flow with the walks' true camera geometry: the flow's own error, apart from the model's.
 """
 
 from __future__ import annotations
@@ -185,8 +186,8 @@ def _matched(est, kin, side="left", t_range=None) -> tuple[np.ndarray, int]:
 def _true_geometry_errors(kin, cam, flow, t_range) -> np.ndarray:
     """Relative errors of strides read from the measured flow with the walk's true camera geometry: s = (1/f) x
     the integral of F h / cos^2(theta) over the stride (h the camera height, theta the optical axis from the
-    vertical; exact for the flow at the image centre in the sagittal plane over a flat floor). What is left is the flow's own error,
-    the bound of any model of the camera geometry."""
+    vertical; exact for the flow at the image centre in the sagittal plane over a flat floor). What is left is
+    the flow's own error, the bound of any model of the camera geometry."""
     t = flow.t_s.to_numpy()
     f = forward_flow(flow)
     ok = np.isfinite(f)
