@@ -7,7 +7,7 @@ without slip, double support, per-step variability; written by another work stre
 Stride length is measured on simulated people: a tuning group (on which the estimator's swing-clearance ratio, the
 failure threshold and the sigma floor were chosen) and a test group of other people, each person with a drawn leg
 proportion (Bogin & Varela-Silva 2010) and step-length law (``GaitUser``; healthy and older cohorts), at three speeds,
-on two real floors, with two camera set-ups. The estimator is given what a user knows: the height and the leg length
+on three real floors (gravel, brick, grass), with two camera set-ups. The estimator is given what a user knows: the height and the leg length
 tape-measured (+-1 cm), the camera's mount distance below the knee measured (+-0.5 cm), the camera intrinsics; the
 segment lengths come from Winter's ratios (``SlipBody.from_user``). Each group also reports its strides read from the
 measured flow with the walks' true camera geometry: the flow's own error, apart from the model's.
@@ -82,7 +82,7 @@ def _flow_rows(quick: bool) -> list[dict]:
         anchor = "0.03%" if s == 1 else "9.20%"
         rows.append(_row(f"random 255x255, {s} px", "interpolation rel. error of the mean", 100 * abs(np.mean(u) - s) / s, "%",
                          "-", f"{anchor} ({THESIS}, Fig. 4)"))
-    for name in ("gravel", "brick"):
+    for name in TEXTURES:
         tex = load_texture(name).astype(np.float32)
         errs = {"correlation": [], "phase": [], "interpolation (<= 4 px)": []}
         phase = PhaseCorrelationOpticalFlow(patch_px=200)
@@ -207,11 +207,11 @@ def _true_geometry_errors(kin, cam, flow, t_range) -> np.ndarray:
 
 def walk_cases(people, speeds, quick: bool):
     """(person spec, speed, camera, texture) of every walk: each person walks every speed; cameras and floors
-    alternate so that every person sees both cameras and both floors."""
+    alternate so that every person sees both cameras and every floor."""
     out = []
     for i, spec in enumerate(people):
         for j, v in enumerate(speeds):
-            out.append((spec, v, list(CAMERAS)[(i + j) % 2], TEXTURES[(i + j // 2) % 2] if not quick else "gravel"))
+            out.append((spec, v, list(CAMERAS)[(i + j) % 2], TEXTURES[(i + j) % len(TEXTURES)] if not quick else "gravel"))
     return out
 
 

@@ -57,7 +57,7 @@ def test_error_growth_shifts_1_to_19():
     assert errs[0] < 0.02
 
 
-@pytest.mark.parametrize("name", ["gravel", "brick"])
+@pytest.mark.parametrize("name", ["gravel", "brick", "grass"])
 def test_real_textures_known_shifts(name):
     tex = _texture(name)
     corr = CorrelationOpticalFlow(patch_px=40, grid_step_px=40, max_shift_px=22)

@@ -38,7 +38,7 @@ class Slide:
         return np.broadcast_to(r, (len(np.asarray(t)), 3, 3)).copy()
 
 
-@pytest.mark.parametrize("texture", ["gravel", "brick"])
+@pytest.mark.parametrize("texture", ["gravel", "brick", "grass"])
 def test_renderer_flow_matches_projective_geometry(texture):
     frames, table = render_leg_camera(Slide(1.0, 0.6), CAM, 0.0, 1.0, load_texture(texture))
     assert frames.shape == (101, 120, 160) and frames.dtype == np.uint8 and frames.std() > 10

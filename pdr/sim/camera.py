@@ -24,7 +24,7 @@ from pdr.errors import InputError
 from pdr.flow.camera import CAMERA_KEYS, MOUNT_KEYS, CameraModel  # noqa: F401 (re-exported for pdr.sim.simulator)
 from pdr.io.atomic import atomic_path
 
-TEXTURES = ("gravel", "brick")
+TEXTURES = ("gravel", "brick", "grass")
 SKY_GREY = 128.0
 
 
@@ -35,7 +35,7 @@ class Kinematics(Protocol):
 
 
 def load_texture(name_or_path: str | Path, datasets: Path | None = None) -> np.ndarray:
-    """A grey ground texture: ``gravel`` / ``brick`` from ``ground_textures_cc0`` (the project's ``datasets/``
+    """A grey ground texture: ``gravel`` / ``brick`` / ``grass`` from ``ground_textures_cc0`` (the project's ``datasets/``
     copy or ``../shared/datasets``), or a path to an image file."""
     path = Path(name_or_path)
     if str(name_or_path) in TEXTURES:

@@ -54,12 +54,12 @@ class Body:
     leg_length_m = property(lambda self: self.thigh_m + self.shank_m + self.ankle_height_m)
 
     def subject(self, mass_kg: float | None = None) -> dict[str, float]:
-        """The ``[subject]`` table of ``meta.toml``."""
-        out = {"height_m": self.height_m, "leg_length_m": self.leg_length_m, "thigh_length_m": self.thigh_m,
-               "shank_length_m": self.shank_m, "foot_length_m": self.foot_m}
+        """The ``[subject]`` table of ``meta.toml``: what a person knows of their body, the height to the
+        centimetre and the leg length (not the segment lengths, which nobody knows without a motion lab)."""
+        out = {"height_m": round(self.height_m, 2), "leg_length_m": round(self.leg_length_m, 4)}
         if mass_kg is not None:
             out["mass_kg"] = float(mass_kg)
-        return {k: round(v, 4) for k, v in out.items()}
+        return out
 
 
 LEG_SCALE_SD = 0.025  # relative leg length, 1 SD (Bogin & Varela-Silva 2010)

@@ -5,8 +5,9 @@ Scenario keys (TOML; every table but ``[[segment]]`` and ``[route]`` is optional
 ``[simulation]`` ``id`` (recording id; default the file name), ``description``.
 ``[subject]`` ``height_m`` (default: drawn, 1.60-1.90 m), ``mass_kg``, ``cohort`` (``healthy``, ``older``, ``impaired``;
     default healthy; :data:`pdr.sim.people.COHORTS`). The person's leg proportion, step-length law and pelvis excursion
-    are drawn per seed (:class:`pdr.sim.people.GaitUser`); ``meta.toml`` ``[subject]`` gets what a user would measure:
-    the height, the leg length and (waist IMU) the sensor height, each to +-1 cm (:data:`MEASURE_STD_M`).
+    are drawn per seed (:class:`pdr.sim.people.GaitUser`); ``meta.toml`` ``[subject]`` gets what a user would know:
+    the height to the centimetre, the leg length and (waist IMU) the sensor height tape-measured to +-1 cm
+    (:data:`MEASURE_STD_M`); no segment lengths.
 ``[geo]`` ``origin_lat_deg``, ``origin_lon_deg`` (default 46.5191, 6.5668), ``origin_alt_m`` (default 400).
 ``[route]`` ``waypoints_m`` ([[east, north], ...], the polyline walked), ``loop`` (repeat it, closed, as long as
     needed; default true), ``grades`` (slope per leg, rise/run; default flat), ``turn_smoothing_m`` (default 0.8).
@@ -25,7 +26,8 @@ Scenario keys (TOML; every table but ``[[segment]]`` and ``[route]`` is optional
 ``[gait]`` ``cv_slow``, ``cv_fast`` (per-step step-length variability at 0.6 and 1.7 m/s; default: the cohort's,
 :data:`pdr.sim.people.COHORTS`).
 ``[camera]`` a leg camera rendered by :mod:`pdr.sim.camera`: ``fps, focal_px, cx_px, cy_px, width_px, height_px,
-    segment, distance_from_knee_m, texture`` (``gravel``/``brick``/a path), optional ``t_start_s, t_end_s``.
+    segment, distance_from_knee_m, texture`` (``gravel``/``brick``/``grass``/a path), optional ``t_start_s, t_end_s``;
+    ``camera.toml`` gets the mount distance as a user measures it, to +-0.5 cm (:data:`MOUNT_STD_M`).
 ``[[fault]]`` / ``[faults]`` sensor faults injected into the recording (:mod:`pdr.sim.faults`): explicit ones
     (``kind``, ``t_start_s``, ``duration_s``, ...) and/or random ones (``fraction``, ``kinds``, ...); their truth goes
     to ``reference/faults.csv``.
@@ -76,6 +78,7 @@ DEFAULT_ORIGIN = (46.5191, 6.5668, 400.0)
 # fixed sub-stream keys of the seed
 _RNG_PERSON, _RNG_STEPS, _RNG_GNSS, _RNG_STEEL, _RNG_BARO, _RNG_CAMERA, _RNG_MEASURE, _RNG_IMU = 1, 2, 3, 4, 5, 6, 7, 10
 MEASURE_STD_M = 0.01  # a tape-measured body length or sensor height
+MOUNT_STD_M = 0.005  # the leg camera's distance below the knee joint line, measured on the strapped camera
 
 
 def _typed(section: str, table: dict, spec: dict[str, type]) -> dict:
@@ -364,6 +367,8 @@ def simulate(scenario: dict[str, Any], seed: int, *, workdir: Path | None = None
     if sc.camera is not None:
         workdir = Path(tempfile.mkdtemp(prefix="pdr-sim-")) if workdir is None else workdir
         rec.camera, rec.video_path, rec.frames = _render_camera(kin, sc.camera, seed, workdir, duration)
+        mount = rec.camera["mount"]
+        mount["distance_from_knee_m"] = round(mount["distance_from_knee_m"] + MOUNT_STD_M * rng_measure.standard_normal(), 3)
     return rec
 
 
