@@ -447,6 +447,28 @@ def test_gyroscope_times_the_handling_to_the_move():
     assert len(WaveletStepDetection(leave_out_handling=True).detect(acc_only).steps_) == n_true - 1
 
 
+def test_a_dead_gyroscope_is_ignored_with_a_warning():
+    """Gyroscope columns of zeros (an export that did not read the sensor): without the check no tilt rate would
+    reach a move's and the handling would never be found; instead they are warned about and the accelerometer times
+    the handling, as with no gyroscope at all."""
+    from pdr.io.recording import GYR_COLUMNS
+    from pdr.io.tomlio import read_toml
+    from pdr.signals import uniform_imu
+    from pdr.steps.handling import AttitudeHandlingDetection
+
+    rec = simulate(read_toml(HANDLING_SCENARIO), seed=123)
+    dead = rec.imu.assign(**{c: 0.0 for c in GYR_COLUMNS})
+    acc_only = rec.imu.drop(columns=list(GYR_COLUMNS))
+    with warns(match="gyroscope reads a constant .* ignored"):
+        found = AttitudeHandlingDetection().detect(uniform_imu(dead))
+    assert not found.gyroscope_used_ and len(found.intervals_) == 2
+    pd.testing.assert_frame_equal(found.intervals_, AttitudeHandlingDetection().detect(uniform_imu(acc_only)).intervals_)
+    with warns(match="gyroscope reads a constant"):
+        steps = WaveletStepDetection(leave_out_handling=True).detect(dead).steps_
+    pd.testing.assert_frame_equal(steps, WaveletStepDetection(leave_out_handling=True).detect(acc_only).steps_)
+    assert AttitudeHandlingDetection().detect(uniform_imu(rec.imu)).gyroscope_used_
+
+
 def test_a_slow_tilt_is_not_handling_with_a_gyroscope():
     """A phone at rest tilting by 90° over 4 s (0.39 rad/s, as slow as the trunk's own tilt): the accelerometer's
     windows see a turn, the gyroscope no move of the hand."""

@@ -6,11 +6,27 @@ import numpy as np
 import pandas as pd
 
 from pdr.base import Algorithm
-from pdr.errors import InputError
+from pdr.errors import InputError, warn
 from pdr.signals.attitude import gravity_direction_lowpass
 from pdr.signals.resample import UniformImu, runs
 
 HANDLING_COLUMNS = ["t_start_s", "t_end_s", "turn_deg"]
+
+
+def live_gyroscope(u: UniformImu) -> np.ndarray | None:
+    """The angular rate of ``u`` (rad/s), or None without a gyroscope or with a dead one: every axis reading one
+    constant value on every valid sample (an export that writes zeros for a sensor it did not read; a real
+    gyroscope's noise and the walker's own turning never leave all three axes constant). A dead gyroscope is
+    warned about and treated as absent, so the handling is timed from the accelerometer instead of never found
+    (no tilt rate would ever reach a move's)."""
+    if u.gyr_radps is None:
+        return None
+    gyr = u.gyr_radps[u.valid] if u.valid.any() else u.gyr_radps
+    if len(gyr) and np.all(np.ptp(gyr, axis=0) == 0.0):
+        warn(f"handling: the gyroscope reads a constant {gyr[0].tolist()} rad/s on every sample (dead or not "
+             f"recorded): ignored, the phone's handling is found from the accelerometer alone")
+        return None
+    return u.gyr_radps
 
 
 class AttitudeHandlingDetection(Algorithm):
@@ -50,6 +66,7 @@ class AttitudeHandlingDetection(Algorithm):
         turn from the window before the move to the one after it).
     handling_ : per-sample flag on ``t_s_``.
     turn_deg_ : the turn at each sample (degrees).
+    gyroscope_used_ : whether a live gyroscope timed the intervals (:func:`live_gyroscope`).
     t_s_ : the uniform grid.
 
     Notes
@@ -88,7 +105,9 @@ class AttitudeHandlingDetection(Algorithm):
         i = np.arange(n)
         before, after = up[np.clip(i - half, 0, n - 1)], up[np.clip(i + half, 0, n - 1)]
         self.turn_deg_ = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", before, after), -1.0, 1.0)))
-        tilt_rate = None if u.gyr_radps is None else np.linalg.norm(np.cross(u.gyr_radps, up), axis=1)
+        gyr = live_gyroscope(u)
+        self.gyroscope_used_ = gyr is not None
+        tilt_rate = None if gyr is None else np.linalg.norm(np.cross(gyr, up), axis=1)
         candidate_deg = self.min_turn_deg if tilt_rate is None else 0.5 * self.min_turn_deg
         self.handling_ = np.zeros(n, bool)
         seen = np.zeros(n, bool)

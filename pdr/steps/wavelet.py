@@ -213,7 +213,7 @@ class WaveletStepDetection(Algorithm):
             decided[:edge] = decided[len(decided) - edge:] = False
             # a gyroscope times the handling to the move itself: a walking window centred within half a window of
             # it holds the move, so it does not show walking beside it
-            reach = int(round(0.5 * self.bout_window_s * u.rate_hz)) if u.gyr_radps is not None else 0
+            reach = int(round(0.5 * self.bout_window_s * u.rate_hz)) if handled.gyroscope_used_ else 0
         sums = (np.concatenate([[0.0], np.cumsum(x)]), np.concatenate([[0.0], np.cumsum(x * x)]))
         times, bout_ids, rows, left_out = [], [], [], []
         bout_id = 0
