@@ -462,7 +462,8 @@ def test_a_dead_gyroscope_is_ignored_with_a_warning():
     with warns(match="gyroscope reads a constant .* ignored"):
         found = AttitudeHandlingDetection().detect(uniform_imu(dead))
     assert not found.gyroscope_used_ and len(found.intervals_) == 2
-    pd.testing.assert_frame_equal(found.intervals_, AttitudeHandlingDetection().detect(uniform_imu(acc_only)).intervals_)
+    expected = AttitudeHandlingDetection().detect(uniform_imu(acc_only)).intervals_
+    pd.testing.assert_frame_equal(found.intervals_, expected)
     with warns(match="gyroscope reads a constant"):
         steps = WaveletStepDetection(leave_out_handling=True).detect(dead).steps_
     pd.testing.assert_frame_equal(steps, WaveletStepDetection(leave_out_handling=True).detect(acc_only).steps_)
