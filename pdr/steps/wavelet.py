@@ -13,7 +13,7 @@ from pdr.errors import InputError, warn
 from pdr.signals.attitude import gravity_direction_lowpass
 from pdr.signals.resample import UniformImu, moving_average, runs, uniform_imu
 from pdr.steps.gait import bouts_from_mask, core_walking, rest_threshold_mps2, undecided_samples, walking_mask
-from pdr.steps.handling import HANDLING_COLUMNS, AttitudeHandlingDetection
+from pdr.steps.handling import HANDLING_COLUMNS, AttitudeHandlingDetection, steps_continuing_the_gait, vertical_impacts
 
 STEP_COLUMNS = ["t_s", "bout_id"]
 BOUT_COLUMNS = ["bout_id", "t_start_s", "t_end_s", "step_period_s", "n_steps"]
@@ -216,6 +216,7 @@ class WaveletStepDetection(Algorithm):
             reach = int(round(0.5 * self.bout_window_s * u.rate_hz)) if handled.gyroscope_used_ else 0
         sums = (np.concatenate([[0.0], np.cumsum(x)]), np.concatenate([[0.0], np.cumsum(x * x)]))
         times, bout_ids, rows, left_out = [], [], [], []
+        impacts = None
         bout_id = 0
         for a, b in bouts:
             p = period[a:b]
@@ -227,8 +228,12 @@ class WaveletStepDetection(Algorithm):
             local = moving_average(np.where(np.isfinite(local), local, step_s), int(round(self.bout_window_s * u.rate_hz)))
             t_peaks = self._bout_steps(u, x, a, b, local, core[a:b], sums)
             if handled is not None:
+                t_all = t_peaks
                 t_peaks, dropped = self._leave_out_handling(u, handled.handling_, decided, a, b, t_peaks, reach)
                 left_out += dropped
+                if dropped and handled.gyroscope_used_:  # a step taken while the phone still turns
+                    impacts = vertical_impacts(u) if impacts is None else impacts
+                    t_peaks = steps_continuing_the_gait(u, impacts, t_all, t_peaks, step_s)
             for seg in self._split_stops(t_peaks, step_s, max_step_s):
                 if len(seg) < self.min_bout_steps:
                     continue
