@@ -484,3 +484,32 @@ def test_a_slow_tilt_is_not_handling_with_a_gyroscope():
     assert len(AttitudeHandlingDetection().detect(uniform_imu(imu)).intervals_) == 1
     imu = imu.assign(gyr_x_radps=rate, gyr_y_radps=0.0, gyr_z_radps=0.0)
     assert AttitudeHandlingDetection().detect(uniform_imu(imu)).intervals_.empty
+
+
+def test_a_step_taken_during_the_move_is_kept_by_its_impact():
+    """A left-out maximum one step before the bout's first kept step is a step when the earth-vertical force shows
+    a foot's impact there (at least half the bout's); a maximum of the hand there (no impact), or one far from the
+    step period, is not; the same at the bout's end."""
+    from pdr.signals.resample import UniformImu
+    from pdr.steps.handling import steps_continuing_the_gait
+
+    rate, step_s = 100.0, 0.5
+    t = np.arange(0.0, 12.0, 1.0 / rate)
+    kept = np.arange(4.0, 8.01, step_s)
+    u = UniformImu(t_s=t, rate_hz=rate, acc_mps2=np.zeros((len(t), 3)), gyr_radps=None, mag_ut=None,
+                   baro_hpa=None, valid=np.ones(len(t), bool))
+
+    def impacts(at_s, size):
+        out = np.zeros(len(t))
+        for x, s in zip(at_s, size):
+            out[int(round(x * rate)) + 3] = s  # the transient's peak just after the contact
+        return out
+
+    maxima = np.concatenate([[2.9, 3.5], kept, [8.5]])
+    found = steps_continuing_the_gait(u, impacts([*kept, 3.5, 8.5], [2.0] * len(kept) + [1.2, 0.4]), maxima, kept,
+                                      step_s)
+    np.testing.assert_allclose(found, np.concatenate([[3.5], kept]))  # the end's maximum: impact below half
+    assert len(steps_continuing_the_gait(u, impacts(kept, [2.0] * len(kept)), maxima, kept, step_s)) == len(kept)
+    far = np.concatenate([[3.3], kept])  # 1.4 steps before: not the gait's next step back
+    assert len(steps_continuing_the_gait(u, impacts([*kept, 3.3], [2.0] * (len(kept) + 1)), far, kept, step_s)) \
+        == len(kept)

@@ -126,6 +126,8 @@ class WaveletStepDetection(Algorithm):
     leave_out_handling : maxima inside the phone's handling (:class:`pdr.steps.handling.AttitudeHandlingDetection`:
         taken out, put away, turned over) at an edge of a bout, with no gait-periodic window between it and the
         bout's end, are not steps: there the acceleration is the hand's, not the gait's (:meth:`_leave_out_handling`).
+        With a gyroscope, the one among them a step period beyond the bout's first (last) kept step that carries a
+        foot's impact is a step (:func:`pdr.steps.handling.steps_continuing_the_gait`: set off during the move).
         Off by default (a strapped sensor is not handled); ``pdr steps`` and ``pdr run`` turn it on for a phone's
         placements (:data:`pdr.pipelines.steps.PHONE_PLACEMENTS`).
 
@@ -230,10 +232,14 @@ class WaveletStepDetection(Algorithm):
             if handled is not None:
                 t_all = t_peaks
                 t_peaks, dropped = self._leave_out_handling(u, handled.handling_, decided, a, b, t_peaks, reach)
-                left_out += dropped
                 if dropped and handled.gyroscope_used_:  # a step taken while the phone still turns
                     impacts = vertical_impacts(u) if impacts is None else impacts
-                    t_peaks = steps_continuing_the_gait(u, impacts, t_all, t_peaks, step_s)
+                    kept = steps_continuing_the_gait(u, impacts, t_all, t_peaks, step_s)
+                    back = np.setdiff1d(kept, t_peaks)
+                    dropped = [(lo, hi, n - int(((back >= lo) & (back <= hi)).sum())) for lo, hi, n in dropped]
+                    dropped = [d for d in dropped if d[2] > 0]
+                    t_peaks = kept
+                left_out += dropped
             for seg in self._split_stops(t_peaks, step_s, max_step_s):
                 if len(seg) < self.min_bout_steps:
                     continue
