@@ -13,8 +13,9 @@ of the pocket (1.5-2.5 s), walks 20-45 steps at 1.1-1.5 m/s, stops and puts it b
 Seeds 0-11 are the evaluation; seeds 100-129, and seeds 100-109 with the phone taken out and put back while the
 walker walks on, are the tuning set on which the handling rule of the step detector was chosen. Seeds 100-129 with
 the walker setting off before the phone is in the hand (and putting it away before stopping) are the tuning case of
-the Oxford armband's first piece (steps taken while the phone still turns), seeds 0-11 of it its evaluation; no rule
-tried on it keeps the steps taken during the move without counting the hand's movement (README, Known limits).
+the Oxford armband's first piece (steps taken while the phone still turns), seeds 0-11 of it its evaluation; with a
+gyroscope the step next to the walking is kept by its foot impact in the earth-vertical force, the ones before it
+are still lost (README, Known limits).
 """
 
 from __future__ import annotations

@@ -447,6 +447,29 @@ def test_gyroscope_times_the_handling_to_the_move():
     assert len(WaveletStepDetection(leave_out_handling=True).detect(acc_only).steps_) == n_true - 1
 
 
+def test_a_dead_gyroscope_is_ignored_with_a_warning():
+    """Gyroscope columns of zeros (an export that did not read the sensor): without the check no tilt rate would
+    reach a move's and the handling would never be found; instead they are warned about and the accelerometer times
+    the handling, as with no gyroscope at all."""
+    from pdr.io.recording import GYR_COLUMNS
+    from pdr.io.tomlio import read_toml
+    from pdr.signals import uniform_imu
+    from pdr.steps.handling import AttitudeHandlingDetection
+
+    rec = simulate(read_toml(HANDLING_SCENARIO), seed=123)
+    dead = rec.imu.assign(**{c: 0.0 for c in GYR_COLUMNS})
+    acc_only = rec.imu.drop(columns=list(GYR_COLUMNS))
+    with warns(match="gyroscope reads a constant .* ignored"):
+        found = AttitudeHandlingDetection().detect(uniform_imu(dead))
+    assert not found.gyroscope_used_ and len(found.intervals_) == 2
+    expected = AttitudeHandlingDetection().detect(uniform_imu(acc_only)).intervals_
+    pd.testing.assert_frame_equal(found.intervals_, expected)
+    with warns(match="gyroscope reads a constant"):
+        steps = WaveletStepDetection(leave_out_handling=True).detect(dead).steps_
+    pd.testing.assert_frame_equal(steps, WaveletStepDetection(leave_out_handling=True).detect(acc_only).steps_)
+    assert AttitudeHandlingDetection().detect(uniform_imu(rec.imu)).gyroscope_used_
+
+
 def test_a_slow_tilt_is_not_handling_with_a_gyroscope():
     """A phone at rest tilting by 90° over 4 s (0.39 rad/s, as slow as the trunk's own tilt): the accelerometer's
     windows see a turn, the gyroscope no move of the hand."""
@@ -461,3 +484,32 @@ def test_a_slow_tilt_is_not_handling_with_a_gyroscope():
     assert len(AttitudeHandlingDetection().detect(uniform_imu(imu)).intervals_) == 1
     imu = imu.assign(gyr_x_radps=rate, gyr_y_radps=0.0, gyr_z_radps=0.0)
     assert AttitudeHandlingDetection().detect(uniform_imu(imu)).intervals_.empty
+
+
+def test_a_step_taken_during_the_move_is_kept_by_its_impact():
+    """A left-out maximum one step before the bout's first kept step is a step when the earth-vertical force shows
+    a foot's impact there (at least half the bout's); a maximum of the hand there (no impact), or one far from the
+    step period, is not; the same at the bout's end."""
+    from pdr.signals.resample import UniformImu
+    from pdr.steps.handling import steps_continuing_the_gait
+
+    rate, step_s = 100.0, 0.5
+    t = np.arange(0.0, 12.0, 1.0 / rate)
+    kept = np.arange(4.0, 8.01, step_s)
+    u = UniformImu(t_s=t, rate_hz=rate, acc_mps2=np.zeros((len(t), 3)), gyr_radps=None, mag_ut=None,
+                   baro_hpa=None, valid=np.ones(len(t), bool))
+
+    def impacts(at_s, size):
+        out = np.zeros(len(t))
+        for x, s in zip(at_s, size):
+            out[int(round(x * rate)) + 3] = s  # the transient's peak just after the contact
+        return out
+
+    maxima = np.concatenate([[2.9, 3.5], kept, [8.5]])
+    found = steps_continuing_the_gait(u, impacts([*kept, 3.5, 8.5], [2.0] * len(kept) + [1.2, 0.4]), maxima, kept,
+                                      step_s)
+    np.testing.assert_allclose(found, np.concatenate([[3.5], kept]))  # the end's maximum: impact below half
+    assert len(steps_continuing_the_gait(u, impacts(kept, [2.0] * len(kept)), maxima, kept, step_s)) == len(kept)
+    far = np.concatenate([[3.3], kept])  # 1.4 steps before: not the gait's next step back
+    assert len(steps_continuing_the_gait(u, impacts([*kept, 3.3], [2.0] * (len(kept) + 1)), far, kept, step_s)) \
+        == len(kept)
