@@ -27,6 +27,7 @@ from pdr.pipelines.leg_camera import forward_flow
 from pdr.sim.camera import TEXTURES, CameraModel, load_texture, render_leg_camera
 from pdr.sim.gait import WalkKinematics
 from pdr.sim.people import LEG_SCALE_SD, Body, GaitUser, plan_walk
+from pdr.sim.simulator import MEASURE_STD_M, MOUNT_STD_M
 from pdr.sim.route import Route
 from pdr.slip.fit import SlipOpticalFlowStride
 from pdr.slip.model import SlipBody
@@ -46,8 +47,6 @@ SPEEDS_MPS = (0.8, 1.2, 1.6)
 TUNING_PEOPLE = ((1.55, 11, "healthy"), (1.68, 12, "older"), (1.80, 13, "healthy"), (1.92, 14, "healthy"))
 TEST_PEOPLE = ((1.50, 21, "healthy"), (1.62, 22, "healthy"), (1.74, 23, "older"), (1.86, 24, "healthy"),
                (1.95, 25, "healthy"))
-TAPE_STD_M = 0.01  # a tape-measured height or leg length
-MOUNT_STD_M = 0.005  # the camera's distance below the knee joint line, measured
 
 
 def _row(case, metric, ours, unit, target, anchor):
@@ -131,7 +130,7 @@ def person(height_m: float, seed: int, cohort: str) -> Person:
     body = Body(height_m, float(np.clip(1.0 + LEG_SCALE_SD * rng.standard_normal(), 0.9, 1.1)))
     user = GaitUser.draw(rng, cohort=cohort)
     tape = np.random.default_rng([seed, 2]).standard_normal(3)
-    known = dict(height_m=height_m + TAPE_STD_M * tape[0], leg_length_m=body.leg_length_m + TAPE_STD_M * tape[1],
+    known = dict(height_m=height_m + MEASURE_STD_M * tape[0], leg_length_m=body.leg_length_m + MEASURE_STD_M * tape[1],
                  mount_error_m=MOUNT_STD_M * tape[2])
     return Person(body, user, known, seed)
 
