@@ -74,7 +74,8 @@ def masked(lines: list[str], scratch: Path) -> list[str]:
 
 
 def same_line(shown: str, printed: str) -> bool:
-    """The same text and integers, and decimal numbers within :data:`REL_TOL` (or half a unit of the shown last digit)."""
+    """The same text and integers, and decimal numbers within :data:`REL_TOL` (or half a unit of the shown last
+    digit)."""
     if DECIMAL.sub("#", shown) != DECIMAL.sub("#", printed):
         return False
     for a, b in zip(DECIMAL.findall(shown), DECIMAL.findall(printed)):

@@ -368,7 +368,8 @@ def simulate(scenario: dict[str, Any], seed: int, *, workdir: Path | None = None
         workdir = Path(tempfile.mkdtemp(prefix="pdr-sim-")) if workdir is None else workdir
         rec.camera, rec.video_path, rec.frames = _render_camera(kin, sc.camera, seed, workdir, duration)
         mount = rec.camera["mount"]
-        mount["distance_from_knee_m"] = round(mount["distance_from_knee_m"] + MOUNT_STD_M * rng_measure.standard_normal(), 3)
+        measured = mount["distance_from_knee_m"] + MOUNT_STD_M * rng_measure.standard_normal()
+        mount["distance_from_knee_m"] = round(measured, 3)
     return rec
 
 
