@@ -238,11 +238,11 @@ def _group_rows(name: str, data: str, results: list[dict]) -> list[dict]:
             p = np.concatenate(sel)
             rows.append(_row(case, f"stride length bias at {v} m/s", 100 * np.mean(p[:, 0] / p[:, 1] - 1), "%",
                              "within +-2", "-"))
-    for cam in CAMERAS:
-        sel = [r["pairs"] for r in results if r["camera"] == cam and len(r["pairs"])]
+    for key, value, label in [("camera", c, f"{c} camera") for c in CAMERAS] + [("texture", t, f"{t} floor") for t in TEXTURES]:
+        sel = [r["pairs"] for r in results if r[key] == value and len(r["pairs"])]
         if sel:
             p = np.concatenate(sel)
-            rows.append(_row(case, f"stride length MAE, {cam} camera", 100 * np.mean(np.abs(p[:, 0] / p[:, 1] - 1)), "%",
+            rows.append(_row(case, f"stride length MAE, {label}", 100 * np.mean(np.abs(p[:, 0] / p[:, 1] - 1)), "%",
                              "-", "-"))
     geo = np.concatenate([r["true_geometry"] for r in results]) if results else np.zeros(0)
     if len(geo):
