@@ -7,7 +7,7 @@ import pandas as pd
 
 from pdr.base import Algorithm
 from pdr.errors import InputError, warn
-from pdr.signals.attitude import gravity_direction_lowpass
+from pdr.signals.attitude import earth_acceleration, estimate_attitude, gravity_direction_lowpass
 from pdr.signals.resample import UniformImu, moving_average, runs
 
 HANDLING_COLUMNS = ["t_start_s", "t_end_s", "turn_deg"]
@@ -155,7 +155,6 @@ class AttitudeHandlingDetection(Algorithm):
         return start, stop, float(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
 
 
-
 IMPACT_HIGHPASS_S = 0.1  # the foot's contact transient at the trunk rises in 10-30 ms; a hand's reach lasts 0.5-1 s
 MIN_IMPACT_RATIO = 0.5  # a step taken during a move: its impact at least this fraction of the bout's steps'
 
@@ -166,8 +165,6 @@ def vertical_impacts(u: UniformImu) -> np.ndarray:
     (the heel-strike transient at the trunk rises within a few tens of ms: Whittle 1999, *Gait Posture* 10:264),
     not the hand's reach (a smooth, minimum-jerk movement of 0.5-1 s: Flash & Hogan 1985), whatever the phone's
     attitude while it turns. Needs a gyroscope: the accelerometer alone does not know the vertical during a turn."""
-    from pdr.signals.attitude import earth_acceleration, estimate_attitude
-
     az = earth_acceleration(u.acc_mps2, estimate_attitude(u).q_wxyz)[:, 2]
     return az - moving_average(az, max(1, int(round(IMPACT_HIGHPASS_S * u.rate_hz))))
 
