@@ -71,6 +71,24 @@ def test_segmentation_finds_heel_strikes():
     assert np.all((seg.t_toe_off_s - seg.t_start_s) / (seg.t_end_s - seg.t_start_s) > 0.5)
 
 
+def test_segmentation_leaves_out_a_stride_with_a_locked_stance():
+    # a flow tracker locked on the floor pattern reads swing-level flow through the stance after a heel strike
+    # (the 60 fps brick walk of the leg-camera benchmark): the burst then runs past the heel strike, and the stride
+    # it forms has a stance under half of it, which no walking stride has
+    est = SlipOpticalFlowStride(camera_from_knee_m=0.3, focal_px=140.0)
+    t, f, _, dur = _measured(est, (1.3, -0.2, math.radians(15), 12000.0))
+    clean = segment_strides(t, f)
+    hs = clean.t_end_s.iloc[0]
+    f[(t > hs) & (t < hs + 0.5 * dur)] = np.percentile(f, 95)
+    unchecked = segment_strides(t, f, min_stance_fraction=0.0)
+    stance = (unchecked.t_toe_off_s - unchecked.t_start_s) / (unchecked.t_end_s - unchecked.t_start_s)
+    assert (stance < 0.5).sum() == 1  # the merged stride is cut without the check
+    seg = segment_strides(t, f)
+    assert len(seg) == len(unchecked) - 1
+    assert np.all((seg.t_toe_off_s - seg.t_start_s) / (seg.t_end_s - seg.t_start_s) >= 0.5)
+    assert seg.t_start_s.iloc[0] == clean.t_start_s.iloc[-1]  # the clean stride after the lock is kept
+
+
 def test_fit_recovers_its_own_model_roughly():
     est = SlipOpticalFlowStride(camera_from_knee_m=0.3, focal_px=140.0, foot="right")
     t, f, length, _ = _measured(est, (1.3, -0.2, math.radians(15), 12000.0))

@@ -19,6 +19,10 @@ SEGMENT_COLUMNS = ["t_start_s", "t_toe_off_s", "t_end_s"]
 # the swing-clearance fixed point has converged when its last pass moves the stride by less than this fraction
 # (well inside the model's own error, ``model_sigma_fraction``)
 CLEARANCE_TOLERANCE = 0.02
+# walking has double support, so each foot's stance is more than half the stride (Perry & Burnfield 2010, Gait Analysis,
+# ch. 1: 60% at free speed, nearing 50% only where walking turns into running); a shorter measured stance means the
+# "swing burst" is not a swing (e.g. the flow tracker locked onto the floor pattern through the next stance)
+MIN_STANCE_FRACTION = 0.5
 MAX_CLEARANCE_AMPLIFICATION = 2.0  # the fixed point may at most double the first pass's change of the stride
 GAIN_STEP = 1.05  # relative step of the clearance stride in the finite difference of the fixed point's gain
 # Thesis Table 2 (vx m/s, vy m/s, leg angle 10 deg, K); K read as tens of kN/m (its code uses 18,000 N/m).
@@ -30,12 +34,15 @@ GRID = ((0.8, 1.0, 1.2, 1.4, 1.6, 1.9), (-0.5, -0.2, 0.0), tuple(math.radians(d)
 
 
 def segment_strides(t_s: np.ndarray, flow_pxps: np.ndarray, *, high_fraction: float = 0.4, low_fraction: float = 0.12,
-                    min_stride_s: float = 0.6, max_stride_s: float = 2.2) -> pd.DataFrame:
+                    min_stride_s: float = 0.6, max_stride_s: float = 2.2,
+                    min_stance_fraction: float = MIN_STANCE_FRACTION) -> pd.DataFrame:
     """Cut the forward flow of the camera leg into strides, heel strike to heel strike.
 
     The swing of the camera leg is a burst of large positive flow; stance flow is near zero (the shank pivots
     about the contact point under the camera's optical axis). A burst is a run above ``high_fraction`` of the
     95th percentile; it starts (toe off) and ends (heel strike) where the flow crosses ``low_fraction`` of it.
+    A stride whose stance (heel strike to toe off) is under ``min_stance_fraction`` of it is not a walking stride
+    (``MIN_STANCE_FRACTION``): the flow or the cut failed there, and it is left out.
     Returns ``t_start_s, t_toe_off_s, t_end_s`` (one row per complete stride).
     """
     t = np.asarray(t_s, float)
@@ -79,7 +86,7 @@ def segment_strides(t_s: np.ndarray, flow_pxps: np.ndarray, *, high_fraction: fl
         marks.append((t[i], t[j]))
     rows = []
     for (_, hs0), (to1, hs1) in zip(marks[:-1], marks[1:]):
-        if min_stride_s <= hs1 - hs0 <= max_stride_s and hs0 < to1 < hs1:
+        if min_stride_s <= hs1 - hs0 <= max_stride_s and hs0 + min_stance_fraction * (hs1 - hs0) <= to1 < hs1:
             rows.append((hs0, to1, hs1))
     return pd.DataFrame(rows, columns=SEGMENT_COLUMNS) if rows else empty
 
