@@ -128,6 +128,15 @@ def test_short_flow_gaps_do_not_shorten_strides():
     assert len(holed) == len(full) and np.all(holed / full > 0.97) and np.all(holed / full < 1.15)
 
 
+def test_a_backward_window_gives_no_scale_and_no_crash():
+    """A window whose fitted stride is negative and whose flow moved backwards (a tracker lock, a camera turned
+    round) is left by the clearance passes as it is, without a division by its unchanged stride."""
+    est = SlipOpticalFlowStride()
+    fit = dict(flag="length", length_m=-0.4, m_per_px=0.002, length_std_m=0.05, meas_disp_px=-200.0, spread_m=0.0)
+    est._clearance_from_flow([fit])
+    assert fit["length_m"] == -0.4 and fit["clearance_converged"] and fit["flag"] == "length"
+
+
 def test_swing_clearance_follows_the_measured_stride():
     # the fitted SLIP's own stride saturates near 1.0-1.2 m on rendered walks (true up to 1.6 m); the swing clearance,
     # which sets the flow-to-metres scale, is taken from the stride measured from the flow instead (a fixed point)

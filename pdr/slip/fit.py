@@ -416,9 +416,9 @@ class SlipOpticalFlowStride(Algorithm):
         # first pass did multiplies the fit's error as much (x 1 / (1 - gain) for a map of that gain): keep the
         # SLIP's own clearance, with a sigma that covers the strides the passes went through
         for f, (length0, scale0, sigma0), prev, one in zip(fits, start, previous, first):
-            moved = abs(f["length_m"] - prev) / f["length_m"]
+            moved = abs(f["length_m"] - prev) / max(abs(f["length_m"]), 1e-9)
             step = one - length0
-            amplification = (f["length_m"] - length0) / step if abs(step) > 1e-3 * length0 else 1.0
+            amplification = (f["length_m"] - length0) / step if abs(step) > 1e-3 * abs(length0) else 1.0
             f["clearance_converged"] = bool(moved <= CLEARANCE_TOLERANCE and amplification <= MAX_CLEARANCE_AMPLIFICATION)
             f["clearance_gain"] = 0.0
             if not f["clearance_converged"]:
@@ -548,6 +548,8 @@ class SlipOpticalFlowStride(Algorithm):
             flags.append("bound")
         if rel_rms > self.max_residual_fraction:
             flags.append("residual")
+        if not length_m > 0:  # the model stepped backwards or not at all: a broken flow, not a stride
+            flags.append("length")
         return dict(flag="+".join(flags), spread_m=spread_m, residual_fraction=rel_rms,
                     vx_mps=p[0], vy_mps=p[1], leg_angle_rad=p[2], stiffness_npm=p[3], cost=float(best.fun),
                     rms_pxps=float(np.sqrt(float(r @ r) / max(w.sum(), 1e-9))), sim_duration_s=sim[3],
