@@ -213,7 +213,10 @@ class CorrelationOpticalFlow(_FrameFlow):
     min_peak_corr : patches whose correlation peak is below this are discarded (thesis: 0.5).
     blur_sigma_px : Gaussian pre-blur (thesis: sigma 1).
     subpixel : refine each peak by a parabola through its neighbours.
-    predict : centre each search zone on the previous pair's shift (tracks fast motion with a small zone).
+    predict : centre each search zone on the previous pair's shift (tracks fast motion with a small zone); when
+        that match is poor (quality below ``min_peak_corr``: weak peaks, or patches out of consensus) the zone
+        centred on zero shift is searched too and the better-correlating match kept, so the tracker follows a
+        flow that drops beyond the zone within one pair (a heel strike stops the floor under a leg camera).
     consensus_px : patches farther than this from the median patch shift are dropped before the weighted mean
         (a repeated pattern such as brick joints can lock a patch one period off); inf keeps all, as the thesis.
 
@@ -266,11 +269,23 @@ class CorrelationOpticalFlow(_FrameFlow):
     def _shift(self, f1: np.ndarray, f2: np.ndarray) -> tuple[float, float, float]:
         if not hasattr(self, "_last"):
             self._reset()
+        px, py = self._last if self.predict else (0, 0)
+        dx, dy, quality = self._search(f1, f2, px, py)
+        if (px, py) != (0, 0) and not quality >= self.min_peak_corr:
+            # a poor match around the prediction: the flow left the zone within one pair (a heel strike stops the
+            # floor in the image); search around zero shift too and keep the better-correlating match
+            dx0, dy0, q0 = self._search(f1, f2, 0, 0)
+            if q0 > quality:
+                dx, dy, quality = dx0, dy0, q0
+        self._last = (int(round(dx)), int(round(dy))) if quality > 0 else (0, 0)
+        return dx, dy, quality
+
+    def _search(self, f1: np.ndarray, f2: np.ndarray, px: int, py: int) -> tuple[float, float, float]:
+        """Shift and quality of the 3x3 patch grid searched over +/- max_shift_px around the shift (px, py)."""
         h, w = f1.shape
         half, s, step = self.patch_px // 2, int(self.max_shift_px), int(self.grid_step_px)
-        px, py = self._last if self.predict else (0, 0)
         cy, cx = h // 2, w // 2
-        # keep the predicted zone inside the frame
+        # keep the search zone inside the frame
         lim_x = w // 2 - step - half - s
         lim_y = h // 2 - step - half - s
         px, py = int(np.clip(px, -lim_x, lim_x)), int(np.clip(py, -lim_y, lim_y))
@@ -299,7 +314,6 @@ class CorrelationOpticalFlow(_FrameFlow):
                 weights.append(peak)
         n_patches = 9 if step else 1
         if not weights:
-            self._last = (0, 0)
             return float("nan"), float("nan"), 0.0
         wts = np.asarray(weights)
         sh = np.asarray(shifts)
@@ -309,9 +323,7 @@ class CorrelationOpticalFlow(_FrameFlow):
         if keep.any():
             wts, sh = wts[keep], sh[keep]
         dx, dy = (wts[:, None] * sh).sum(axis=0) / wts.sum()
-        self._last = (int(round(dx)), int(round(dy)))
-        quality = float(wts.mean() * len(wts) / n_patches)
-        return float(dx), float(dy), quality
+        return float(dx), float(dy), float(wts.mean() * len(wts) / n_patches)
 
 
 class PhaseCorrelationOpticalFlow(_FrameFlow):
