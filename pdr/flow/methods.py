@@ -215,10 +215,14 @@ class CorrelationOpticalFlow(_FrameFlow):
     subpixel : refine each peak by a parabola through its neighbours.
     predict : centre each search zone on the previous pair's shift (tracks fast motion with a small zone); when
         that match is poor (quality below ``min_peak_corr``: weak peaks, or patches out of consensus) the zone
-        centred on zero shift is searched too and the better-correlating match kept, so the tracker follows a
-        flow that drops beyond the zone within one pair (a heel strike stops the floor under a leg camera).
+        centred on zero shift is searched too and its match kept if better and sharp (``still_min_quality``), so
+        the tracker follows a flow that drops beyond the zone within one pair (a heel strike stops the floor under
+        a leg camera).
     consensus_px : patches farther than this from the median patch shift are dropped before the weighted mean
         (a repeated pattern such as brick joints can lock a patch one period off); inf keeps all, as the thesis.
+    still_min_quality : the least quality at which the zone around zero shift replaces a poor predicted match.
+        Chosen on the leg-camera benchmark's tuning walks: there the still floor of a stance matches at 0.97-0.98,
+        while a swing frame's false match around zero (motion blur, brick one period off) reached 0.83.
 
     Attributes
     ----------
@@ -240,7 +244,7 @@ class CorrelationOpticalFlow(_FrameFlow):
 
     def __init__(self, *, patch_px: int = 24, grid_step_px: int = 24, max_shift_px: int = 12,
                  min_peak_corr: float = 0.5, blur_sigma_px: float = 1.0, subpixel: bool = True, predict: bool = False,
-                 consensus_px: float = 1.5):
+                 consensus_px: float = 1.5, still_min_quality: float = 0.9):
         self.patch_px = patch_px
         self.grid_step_px = grid_step_px
         self.max_shift_px = max_shift_px
@@ -249,6 +253,7 @@ class CorrelationOpticalFlow(_FrameFlow):
         self.subpixel = subpixel
         self.predict = predict
         self.consensus_px = consensus_px
+        self.still_min_quality = still_min_quality
 
     def _reset(self) -> None:
         self._last = (0, 0)
@@ -272,10 +277,11 @@ class CorrelationOpticalFlow(_FrameFlow):
         px, py = self._last if self.predict else (0, 0)
         dx, dy, quality = self._search(f1, f2, px, py)
         if (px, py) != (0, 0) and not quality >= self.min_peak_corr:
-            # a poor match around the prediction: the flow left the zone within one pair (a heel strike stops the
-            # floor in the image); search around zero shift too and keep the better-correlating match
+            # a poor match around the prediction: the flow may have left the zone within one pair (a heel strike
+            # stops the floor in the image); the zone around zero shift is searched too, and its match taken only
+            # if it is as sharp as a still floor's, not a blurred swing frame matched one brick off
             dx0, dy0, q0 = self._search(f1, f2, 0, 0)
-            if q0 > quality:
+            if q0 >= self.still_min_quality and q0 > quality:
                 dx, dy, quality = dx0, dy0, q0
         self._last = (int(round(dx)), int(round(dy))) if quality > 0 else (0, 0)
         return dx, dy, quality
