@@ -213,16 +213,9 @@ class CorrelationOpticalFlow(_FrameFlow):
     min_peak_corr : patches whose correlation peak is below this are discarded (thesis: 0.5).
     blur_sigma_px : Gaussian pre-blur (thesis: sigma 1).
     subpixel : refine each peak by a parabola through its neighbours.
-    predict : centre each search zone on the previous pair's shift (tracks fast motion with a small zone); when
-        that match is poor (quality below ``min_peak_corr``: weak peaks, or patches out of consensus) the zone
-        centred on zero shift is searched too and its match kept if better and sharp (``still_min_quality``), so
-        the tracker follows a flow that drops beyond the zone within one pair (a heel strike stops the floor under
-        a leg camera).
+    predict : centre each search zone on the previous pair's shift (tracks fast motion with a small zone).
     consensus_px : patches farther than this from the median patch shift are dropped before the weighted mean
         (a repeated pattern such as brick joints can lock a patch one period off); inf keeps all, as the thesis.
-    still_min_quality : the least quality at which the zone around zero shift replaces a poor predicted match.
-        Chosen on the leg-camera benchmark's tuning walks: there the still floor of a stance matches at 0.97-0.98,
-        while a swing frame's false match around zero (motion blur, brick one period off) reached 0.83.
 
     Attributes
     ----------
@@ -244,7 +237,7 @@ class CorrelationOpticalFlow(_FrameFlow):
 
     def __init__(self, *, patch_px: int = 24, grid_step_px: int = 24, max_shift_px: int = 12,
                  min_peak_corr: float = 0.5, blur_sigma_px: float = 1.0, subpixel: bool = True, predict: bool = False,
-                 consensus_px: float = 1.5, still_min_quality: float = 0.9):
+                 consensus_px: float = 1.5):
         self.patch_px = patch_px
         self.grid_step_px = grid_step_px
         self.max_shift_px = max_shift_px
@@ -253,7 +246,6 @@ class CorrelationOpticalFlow(_FrameFlow):
         self.subpixel = subpixel
         self.predict = predict
         self.consensus_px = consensus_px
-        self.still_min_quality = still_min_quality
 
     def _reset(self) -> None:
         self._last = (0, 0)
@@ -274,24 +266,11 @@ class CorrelationOpticalFlow(_FrameFlow):
     def _shift(self, f1: np.ndarray, f2: np.ndarray) -> tuple[float, float, float]:
         if not hasattr(self, "_last"):
             self._reset()
-        px, py = self._last if self.predict else (0, 0)
-        dx, dy, quality = self._search(f1, f2, px, py)
-        if (px, py) != (0, 0) and not quality >= self.min_peak_corr:
-            # a poor match around the prediction: the flow may have left the zone within one pair (a heel strike
-            # stops the floor in the image); the zone around zero shift is searched too, and its match taken only
-            # if it is as sharp as a still floor's, not a blurred swing frame matched one brick off
-            dx0, dy0, q0 = self._search(f1, f2, 0, 0)
-            if q0 >= self.still_min_quality and q0 > quality:
-                dx, dy, quality = dx0, dy0, q0
-        self._last = (int(round(dx)), int(round(dy))) if quality > 0 else (0, 0)
-        return dx, dy, quality
-
-    def _search(self, f1: np.ndarray, f2: np.ndarray, px: int, py: int) -> tuple[float, float, float]:
-        """Shift and quality of the 3x3 patch grid searched over +/- max_shift_px around the shift (px, py)."""
         h, w = f1.shape
         half, s, step = self.patch_px // 2, int(self.max_shift_px), int(self.grid_step_px)
+        px, py = self._last if self.predict else (0, 0)
         cy, cx = h // 2, w // 2
-        # keep the search zone inside the frame
+        # keep the predicted zone inside the frame
         lim_x = w // 2 - step - half - s
         lim_y = h // 2 - step - half - s
         px, py = int(np.clip(px, -lim_x, lim_x)), int(np.clip(py, -lim_y, lim_y))
@@ -320,6 +299,7 @@ class CorrelationOpticalFlow(_FrameFlow):
                 weights.append(peak)
         n_patches = 9 if step else 1
         if not weights:
+            self._last = (0, 0)
             return float("nan"), float("nan"), 0.0
         wts = np.asarray(weights)
         sh = np.asarray(shifts)
@@ -329,7 +309,9 @@ class CorrelationOpticalFlow(_FrameFlow):
         if keep.any():
             wts, sh = wts[keep], sh[keep]
         dx, dy = (wts[:, None] * sh).sum(axis=0) / wts.sum()
-        return float(dx), float(dy), float(wts.mean() * len(wts) / n_patches)
+        self._last = (int(round(dx)), int(round(dy)))
+        quality = float(wts.mean() * len(wts) / n_patches)
+        return float(dx), float(dy), quality
 
 
 class PhaseCorrelationOpticalFlow(_FrameFlow):
