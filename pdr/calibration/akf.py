@@ -9,12 +9,12 @@ import pandas as pd
 
 from pdr.base import Algorithm
 from pdr.calibration.segments import distance_segments, gnss_segments
+from pdr.constants import GRAVITY_MPS2
 from pdr.errors import InputError, collect_warnings, warn
 from pdr.fusion._linear import bounded_map
-from pdr.constants import GRAVITY_MPS2
+from pdr.gait.forms import FROUDE_RUN
 from pdr.step_length.models import LEG_LENGTH_PER_HEIGHT, POPULATION_HEIGHT_M, StepLengthModel
 
-WALK_RUN_FROUDE = 0.5  # the walk-run transition (Alexander 1989); faster segments do not calibrate a walking model
 TRACE_COLUMNS = ("rec_index", "t_s", "model_step_m", "step_length_m", "step_length_std_m", "process_std_m")
 
 
@@ -53,7 +53,7 @@ class AdaptiveKalmanCalibration(Algorithm):
     segments_ : every candidate GNSS segment of the filter (``gnss_segments`` columns + ``rec_index``,
         ``measured_std_m``, ``model_step_m``, ``innovation_m``, ``freq_hz``), with ``used`` and the rejection ``reason``.
     model_segments_ : the same for the (longer) segments of the model fit; those walked faster than the walk-run
-        transition are not used (reason ``running``: the step models are walking models, :data:`WALK_RUN_FROUDE`).
+        transition are not used (reason ``running``: the step models are walking models, :data:`pdr.gait.forms.FROUDE_RUN`, the walk-run transition).
     trace_ : per step, the filter's course: ``rec_index, t_s, model_step_m`` (uncalibrated prediction),
         ``step_length_m`` / ``step_length_std_m`` (filtered), ``process_std_m`` (adapted).
     step_length_m_, step_length_std_m_ : the filtered step length per step (all recordings, in order).
@@ -385,11 +385,11 @@ def _reject_running(segs: pd.DataFrame, subjects: list[dict | None]) -> None:
         subj = subj or {}
         leg = subj.get("leg_length_m")
         legs.append(float(leg) if leg is not None else LEG_LENGTH_PER_HEIGHT * float(subj.get("height_m") or POPULATION_HEIGHT_M))
-    v_run = np.sqrt(WALK_RUN_FROUDE * GRAVITY_MPS2 * np.asarray(legs)[segs["rec_index"].to_numpy(int)])
+    v_run = np.sqrt(FROUDE_RUN * GRAVITY_MPS2 * np.asarray(legs)[segs["rec_index"].to_numpy(int)])
     speed = segs["measured_step_m"] * segs["n_steps"] / (segs["t_end_s"] - segs["t_start_s"])
     running = segs["used"].to_numpy(bool) & (speed > v_run).to_numpy(bool)
     segs.loc[running, "used"] = False
-    segs.loc[running, "reason"] = [f"running ({v:.2f} m/s > {r:.2f} m/s, Froude {WALK_RUN_FROUDE:g})"
+    segs.loc[running, "reason"] = [f"running ({v:.2f} m/s > {r:.2f} m/s, Froude {FROUDE_RUN:g})"
                                    for v, r in zip(speed[running], v_run[running])]
 
 
