@@ -19,8 +19,9 @@ def test_numbers_match_within_the_solvers_tolerance_text_and_integers_exactly():
     assert same_line("distance -0.4472418", "distance -0.4472415")
     assert not same_line('  "final_error_m": 0.80884,', '  "final_error_m": 0.8121,')  # 0.4%: a change
     assert not same_line("79 steps, 49.8 m", "80 steps, 49.8 m")  # integers exactly
-    assert not same_line("79 steps, 49.8 m", "79 steps, 49.9 m")  # 0.2%
-    assert same_line("79 steps, 49.8 m", "79 steps, 49.84 m")  # within half a unit of the last digit shown
+    assert not same_line("79 steps, 49.8 m", "79 steps, 50.0 m")  # two units of the last digit shown: a change
+    assert same_line("79 steps, 49.8 m", "79 steps, 49.9 m")  # one unit: the rounding of a value that barely moved
+    assert same_line("last change 0.0208 m", "last change 0.0209 m")
     assert not same_line("graph fusion", "batch fusion")
 
 
