@@ -13,7 +13,7 @@ from pdr.errors import InputError, warn
 from pdr.signals.attitude import gravity_direction_lowpass
 from pdr.signals.resample import UniformImu, moving_average, runs, uniform_imu
 from pdr.steps.gait import bouts_from_mask, core_walking, rest_threshold_mps2, undecided_samples, walking_mask
-from pdr.steps.handling import HANDLING_COLUMNS, AttitudeHandlingDetection, steps_continuing_the_gait, vertical_impacts
+from pdr.steps.handling import HANDLING_COLUMNS, AttitudeHandlingDetection, contact_impacts, steps_continuing_the_gait
 
 STEP_COLUMNS = ["t_s", "bout_id"]
 BOUT_COLUMNS = ["bout_id", "t_start_s", "t_end_s", "step_period_s", "n_steps"]
@@ -126,8 +126,8 @@ class WaveletStepDetection(Algorithm):
     leave_out_handling : maxima inside the phone's handling (:class:`pdr.steps.handling.AttitudeHandlingDetection`:
         taken out, put away, turned over) at an edge of a bout, with no gait-periodic window between it and the
         bout's end, are not steps: there the acceleration is the hand's, not the gait's (:meth:`_leave_out_handling`).
-        With a gyroscope, the one among them a step period beyond the bout's first (last) kept step that carries a
-        foot's impact is a step (:func:`pdr.steps.handling.steps_continuing_the_gait`: set off during the move).
+        The one among them a step period beyond the bout's first (last) kept step that carries a foot's impact is a
+        step (:func:`pdr.steps.handling.steps_continuing_the_gait`: set off during the move).
         Off by default (a strapped sensor is not handled); ``pdr steps`` and ``pdr run`` turn it on for a phone's
         placements (:data:`pdr.pipelines.steps.PHONE_PLACEMENTS`).
 
@@ -232,8 +232,8 @@ class WaveletStepDetection(Algorithm):
             if handled is not None:
                 t_all = t_peaks
                 t_peaks, dropped = self._leave_out_handling(u, handled.handling_, decided, a, b, t_peaks, reach)
-                if dropped and handled.gyroscope_used_:  # a step taken while the phone still turns
-                    impacts = vertical_impacts(u) if impacts is None else impacts
+                if dropped:  # a step taken while the phone still turns
+                    impacts = contact_impacts(u) if impacts is None else impacts
                     kept = steps_continuing_the_gait(u, impacts, t_all, t_peaks, step_s)
                     back = np.setdiff1d(kept, t_peaks)
                     dropped = [(lo, hi, n - int(((back >= lo) & (back <= hi)).sum())) for lo, hi, n in dropped]
