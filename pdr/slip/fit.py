@@ -125,8 +125,9 @@ class SlipOpticalFlowStride(Algorithm):
     swing_profile : "parabola" (thesis eq. 3.17) or "heel" (heel path and inverse kinematics; default).
     swing_clearance_ratio : c in the peak heel lift of the "heel" swing, c x stride x (stride / leg length)
         (dimensionless: the lift over the leg length grows with the square of the stride over the leg length).
-        0.025 is the best of 0.022, 0.025 and 0.04 on the tuning people of ``benchmarks/bench_leg_camera.py``
-        (stride MAE 6.7, 6.0 and 24.9%); the scale is that sensitive to it. The flow's own cost does not pin the
+        0.0175 is the best of 0.015, 0.0175, 0.02 and 0.0225 on the tuning people of
+        ``benchmarks/bench_leg_camera.py`` with the frame-interval flow (stride MAE 6.4, 5.8, 6.0 and 6.8%; with the
+        instantaneous flow 0.025 was best, 6.8%, and 0.04 gave 24.9%); the scale is that sensitive to it. The flow's own cost does not pin the
         clearance (fitting it per window picks near-zero lifts on long strides), so it is not fitted. A
         quadratic law keeps the fixed point of ``clearance_from="flow"`` stable for most bodies; where it is
         not, see :meth:`_clearance_from_flow`.
@@ -150,7 +151,8 @@ class SlipOpticalFlowStride(Algorithm):
     length_scale : per-user factor on the model's stride length (1: none; see ``calibrate``).
     model_sigma_fraction : model error floor of the stride sigma, as a fraction of the length, before the
         swing-clearance fixed point multiplies it by 1 / (1 - gain) (0.05: the per-stride RMS error divided by that
-        factor on the tuning people of ``benchmarks/bench_leg_camera.py``; 97% of their errors within 2 sigma).
+        factor on the tuning people of ``benchmarks/bench_leg_camera.py``; 97% of their errors within 2 sigma then, 93% with
+        the frame-interval flow model).
     min_quality : windows whose mean flow quality is below this give no stride (with a warning).
     multimodal_cost_ratio : refined starts whose cost is within this fraction of the best are other minima of the
         fit; half the spread of their strides joins the sigma.
@@ -161,6 +163,9 @@ class SlipOpticalFlowStride(Algorithm):
         lies at a bound of the parameters: a failed window gives no flow-to-metres scale; its strides take the
         scale of neighbouring windows that did not fail, or none.
     foot : "left" or "right", the leg carrying the camera.
+    frame_interval_s : the camera's frame interval, over which the tracker measures each displacement; the model
+        predicts that displacement of the floor point at the image centre (:func:`pdr.slip.model.simulate_flow`).
+        None: the spacing of the flow samples (one per frame pair); 0: the instantaneous flow (the thesis).
 
     Attributes
     ----------
@@ -192,13 +197,13 @@ class SlipOpticalFlowStride(Algorithm):
 
     def __init__(self, *, thigh_length_m: float = 0.5, shank_length_m: float = 0.6, foot_length_m: float = 0.2,
                  mass_kg: float = 50.0, camera_from_knee_m: float = 0.28, focal_px: float = 1340.0,
-                 swing_ratio: float = 1.2, swing_peak_fraction: float = 0.25, swing_profile: str = "heel", swing_clearance_ratio: float = 0.025,
+                 swing_ratio: float = 1.2, swing_peak_fraction: float = 0.25, swing_profile: str = "heel", swing_clearance_ratio: float = 0.0175,
                  integral_weight: float = 10.0,
                  strides_per_fit: int = 2,
                  length_from: str = "flow", scale_windows: int = 5, n_refine: int = 2, max_evals: int = 60, duration_weight: float = 0.0, length_scale: float = 1.0,
                  model_sigma_fraction: float = 0.05, min_quality: float = 0.3, foot: str = "left",
                  clearance_from: str = "flow", clearance_iterations: int = 4, multimodal_cost_ratio: float = 0.1,
-                 max_residual_fraction: float = 0.5):
+                 max_residual_fraction: float = 0.5, frame_interval_s: float | None = None):
         self.thigh_length_m = thigh_length_m
         self.shank_length_m = shank_length_m
         self.foot_length_m = foot_length_m
@@ -224,6 +229,7 @@ class SlipOpticalFlowStride(Algorithm):
         self.clearance_iterations = clearance_iterations
         self.multimodal_cost_ratio = multimodal_cost_ratio
         self.max_residual_fraction = max_residual_fraction
+        self.frame_interval_s = frame_interval_s
 
     # -- model ---------------------------------------------------------------------------------------------------
     @property
@@ -245,7 +251,8 @@ class SlipOpticalFlowStride(Algorithm):
                                                                      else clearance_stride_m), dt_s=dt_s)
         if kin.heel_m[:, 1].min() < -0.1 or not np.isfinite(kin.distance_m).all():
             return None  # the swing foot goes through the floor, or the camera looks above the horizon
-        return kin.t_s, simulate_flow(kin, self.focal_px), kin.length_m, kin.duration_s
+        interval = self.frame_interval_s if self.frame_interval_s is not None else getattr(self, "_sample_interval_s", None)
+        return kin.t_s, simulate_flow(kin, self.focal_px, interval or None), kin.length_m, kin.duration_s
 
     def _clearance_m(self, stride_m: float) -> float:
         """Peak heel lift of the swing: ratio x stride x (stride / leg length) (grows with the square of the stride)."""
@@ -291,6 +298,9 @@ class SlipOpticalFlowStride(Algorithm):
             raise InputError(f"SlipOpticalFlowStride: expected length_from 'flow' or 'model', found {self.length_from!r}")
         if self.clearance_from not in ("flow", "model"):
             raise InputError(f"SlipOpticalFlowStride: expected clearance_from 'flow' or 'model', found {self.clearance_from!r}")
+        if self.frame_interval_s is not None and not (isinstance(self.frame_interval_s, (int, float))
+                                                      and math.isfinite(self.frame_interval_s) and self.frame_interval_s >= 0):
+            raise InputError(f"SlipOpticalFlowStride: expected frame_interval_s None or >= 0 s, found {self.frame_interval_s!r}")
         if self.foot not in ("left", "right"):
             raise InputError(f"SlipOpticalFlowStride: expected foot 'left' or 'right', found {self.foot!r}")
         q = np.where(np.isfinite(f) & np.isfinite(q), np.clip(q, 0.0, 1.0), 0.0)
@@ -312,6 +322,7 @@ class SlipOpticalFlowStride(Algorithm):
                  "no stride estimated")
             return self
         rate_hz = 1.0 / float(np.median(np.diff(t)))
+        self._sample_interval_s = 1.0 / rate_hz  # one flow sample per frame pair: the frame interval
         cadence_hz = 2.0 / float(np.median(segs.t_end_s - segs.t_start_s))  # steps per second
         if rate_hz < 2.0 * cadence_hz:
             warn(f"SlipOpticalFlowStride: flow at {rate_hz:.1f} Hz is below twice the cadence "
