@@ -418,27 +418,43 @@ def load_recording(path: str | Path, *, with_reference: bool = True) -> Recordin
                      frames=frames, reference=reference, path=path)
 
 
-def exact_time_column(df: pd.DataFrame, column: str = "t_s") -> pd.DataFrame:
-    """``df`` with ``column`` as text when 9 significant digits would merge or reorder distinct times.
+TIME_RESOLUTION_S = 1e-5  # time columns are written to 10 µs at least: 1/1000 of a 100 Hz sample interval
+TIME_COLUMNS = ("t_s", "t_start_s", "t_end_s")
 
-    The CSV tables are written with 9 significant digits; a clock far from zero (a Unix time, a clock jump) with
-    samples 10 ms apart needs more, or the written file would have repeated times that the validator rejects. Then
-    the column gets the fewest digits (up to 17, exact) that keep it strictly increasing; otherwise ``df`` is
-    returned unchanged (the usual case, so files stay as they were)."""
+
+def exact_time_column(df: pd.DataFrame, column: str = "t_s") -> pd.DataFrame:
+    """``df`` with ``column`` as text when ``CSV_DIGITS`` significant digits would round its times by more than
+    ``TIME_RESOLUTION_S`` (or merge or reorder distinct, increasing times).
+
+    The CSV tables are written with 9 significant digits: 10 µs or better up to 10,000 s. A clock far from zero (a
+    Unix time: 1.7e9 s) needs more; the column then gets the digits that keep ``TIME_RESOLUTION_S`` at its largest
+    time (15 at 1.7e9 s), and more while increasing times would repeat (up to 17, exact). A fixed resolution rather
+    than the fewest digits that keep the order: those round a phone's jittered sample instants to 1 ms at 1.7e9 s,
+    a tenth of a 100 Hz interval, and reference times (landmarks 10 s apart) to 10 s. Otherwise ``df`` is returned
+    unchanged (the usual case, so files stay as they were)."""
+    if column not in df.columns:
+        return df
     t = df[column].to_numpy(float)
-    if len(t) < 2 or not np.isfinite(t).all():
+    finite = np.abs(t[np.isfinite(t)])
+    if not len(finite) or not finite.max() > 0:
         return df
-    mag = np.abs(t)
-    scale = 10.0 ** (CSV_DIGITS - 1 - np.floor(np.log10(np.where(mag > 0, mag, 1.0))))
-    if (np.diff(np.round(t * scale) / scale) > 0).all():
+    digits = max(CSV_DIGITS, int(np.floor(np.log10(finite.max()))) + 1 - int(round(np.log10(TIME_RESOLUTION_S))))
+    digits = min(digits, 17)
+    increasing = len(t) > 1 and np.isfinite(t).all() and (np.diff(t) > 0).all()
+    while increasing and digits < 17 and not (np.diff(np.char.mod(f"%.{digits}g", t).astype(float)) > 0).all():
+        digits += 1
+    if digits == CSV_DIGITS:
         return df
-    for digits in range(CSV_DIGITS + 1, 18):
-        text = np.char.mod(f"%.{digits}g", t)
-        if (np.diff(text.astype(float)) > 0).all():
-            break
     out = df.copy()
-    out[column] = text
+    out[column] = np.where(np.isfinite(t), np.char.mod(f"%.{digits}g", t), "")
     return out
+
+
+def exact_time_columns(df: pd.DataFrame) -> pd.DataFrame:
+    """:func:`exact_time_column` for each time column of ``df`` (``TIME_COLUMNS``)."""
+    for column in TIME_COLUMNS:
+        df = exact_time_column(df, column)
+    return df
 
 
 def save_recording(rec: Recording, dest: str | Path, *, force: bool = False) -> Path:
@@ -460,12 +476,12 @@ def save_recording(rec: Recording, dest: str | Path, *, force: bool = False) -> 
             if rec.video_path is not None:
                 shutil.copyfile(rec.video_path, tmp / rec.video_path.name)
         if rec.frames is not None:
-            write_csv(tmp / "frames.csv", rec.frames)
+            write_csv(tmp / "frames.csv", exact_time_column(rec.frames))
         if rec.reference:
             (tmp / "reference").mkdir()
             for name, value in rec.reference.items():
                 if name == "summary":
                     write_text(tmp / "reference" / "summary.toml", dumps_toml({"summary": value}))
                 else:
-                    write_csv(tmp / "reference" / f"{name}.csv", value)
+                    write_csv(tmp / "reference" / f"{name}.csv", exact_time_columns(value))
     return dest

@@ -67,6 +67,16 @@ def parabolic_offset(y: np.ndarray, k: np.ndarray) -> np.ndarray:
     return np.where(np.abs(den) > 1e-12, 0.5 * (a - c) / np.where(np.abs(den) > 1e-12, den, 1.0), 0.0)
 
 
+def bridge_short_gaps(valid: np.ndarray, max_samples: int) -> np.ndarray:
+    """``valid`` with the invalid runs (gaps of the clock) shorter than ``max_samples`` samples set True; a run
+    touching an end of the recording is kept."""
+    out = np.asarray(valid, bool).copy()
+    for a, b in runs(~out):
+        if 0 < a and b < len(out) and b - a < max_samples:
+            out[a:b] = True
+    return out
+
+
 PEAK_NEIGHBOURS = 3  # maxima on each side that a maximum's amplitude is compared with (1.5 strides)
 
 
@@ -204,7 +214,11 @@ class WaveletStepDetection(Algorithm):
         walking, period = walking_mask(x, u.rate_hz, window_s=self.bout_window_s, min_step_s=min_step_s,
                                        max_step_s=max_step_s, min_acc_std_mps2=self.min_acc_std_mps2,
                                        min_periodicity=self.min_periodicity, stride_check=self.stride_check)
-        bouts = bouts_from_mask(walking, u.valid, u.rate_hz, min_bout_s=self.min_bout_steps * min_step_s,
+        # a gap shorter than the longest step does not end a walking bout: the walker walks on through it (the stop
+        # rule's own limit), and splitting there cut the step on each side of it with the bout's edge (a 0.5 s dropout
+        # of a phone walk lost 2 visible steps); the steps are still taken only where there are samples
+        bouts = bouts_from_mask(walking, bridge_short_gaps(u.valid, int(max_step_s * u.rate_hz)), u.rate_hz,
+                                min_bout_s=self.min_bout_steps * min_step_s,
                                 pad_s=self.bout_pad_s)
         core = core_walking(walking, u.rate_hz, self.bout_window_s)
         handled = AttitudeHandlingDetection().detect(u) if self.leave_out_handling else None
@@ -297,8 +311,14 @@ class WaveletStepDetection(Algorithm):
         centre = np.clip(np.round((tk - u.t_s[0]) * u.rate_hz).astype(int), 0, len(x) - 1)
         offs = np.arange(-half.max(), half.max() + 1)
         idx = np.clip(centre[:, None] + offs[None, :], 0, len(x) - 1)
-        score = np.where(np.abs(offs)[None, :] <= half[:, None], x[idx], -np.inf)
+        score = np.where((np.abs(offs)[None, :] <= half[:, None]) & u.valid[idx], x[idx], -np.inf)
         best = idx[np.arange(len(idx)), np.argmax(score, axis=1)]
+        # inside a gap of the clock (or at its edge, where the largest sample may only be the last one seen) the
+        # contact is not seen: no step there
+        seen = np.isfinite(score).any(axis=1) & u.valid[np.maximum(best - 1, 0)] & u.valid[np.minimum(best + 1, len(x) - 1)]
+        if not seen.any():
+            return np.zeros(0)
+        tk, step_s, best = tk[seen], step_s[seen], best[seen]
         tb = u.t_s[best] + parabolic_offset(x, best) / u.rate_hz
         order = np.argsort(tb)
         tb, step_s = tb[order], step_s[order]
