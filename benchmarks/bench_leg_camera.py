@@ -182,6 +182,18 @@ def _matched(est, kin, side="left", t_range=None) -> tuple[np.ndarray, int]:
     return np.array(out).reshape(-1, 3), len(tl)
 
 
+def _stride_errors(kin, cam, t, metres_px, t_range) -> np.ndarray:
+    """Relative errors of the camera foot's true strides inside ``t_range`` read as (1/f) x the integral over each
+    stride of ``metres_px`` (flow times h / cos^2(theta), m px/s)."""
+    true = kin.true_strides()
+    true = true[(true.foot == cam.side) & (true.t_start_s >= t_range[0]) & (true.t_end_s <= t_range[1])]
+    out = []
+    for r in true.itertuples():
+        m = (t >= r.t_start_s) & (t <= r.t_end_s)
+        out.append(np.trapezoid(metres_px[m], t[m]) / cam.focal_px / r.length_m - 1)
+    return np.array(out)
+
+
 def _true_geometry_errors(kin, cam, flow, t_range) -> np.ndarray:
     """Relative errors of strides read from the measured flow with the walk's true camera geometry: s = (1/f) x
     the integral of F h / cos^2(theta) over the stride (h the camera height, theta the optical axis from the
@@ -195,13 +207,7 @@ def _true_geometry_errors(kin, cam, flow, t_range) -> np.ndarray:
     axis = np.asarray(kin.segment_rotation(t, cam.segment), float)[:, :, 2]
     height = knee[:, 2] + cam.distance_from_knee_m * axis[:, 2]
     g = height / axis[:, 2] ** 2
-    true = kin.true_strides()
-    true = true[(true.foot == cam.side) & (true.t_start_s >= t_range[0]) & (true.t_end_s <= t_range[1])]
-    out = []
-    for r in true.itertuples():
-        m = (t >= r.t_start_s) & (t <= r.t_end_s)
-        out.append(np.trapezoid(f[m] * g[m], t[m]) / cam.focal_px / r.length_m - 1)
-    return np.array(out)
+    return _stride_errors(kin, cam, t, f * g, t_range)
 
 
 def _true_displacement_errors(kin, cam, flow, t_range) -> np.ndarray:
@@ -226,13 +232,7 @@ def _true_displacement_errors(kin, cam, flow, t_range) -> np.ndarray:
     mid = pose(t)[1][:, :, 2]
     height = np.asarray(kin.joint_positions_m(t)[f"knee_{cam.side}"], float)[:, 2] + cam.distance_from_knee_m * mid[:, 2]
     g = height / mid[:, 2] ** 2
-    true = kin.true_strides()
-    true = true[(true.foot == cam.side) & (true.t_start_s >= t_range[0]) & (true.t_end_s <= t_range[1])]
-    out = []
-    for r in true.itertuples():
-        m = (t >= r.t_start_s) & (t <= r.t_end_s)
-        out.append(np.trapezoid(f[m] * g[m], t[m]) / cam.focal_px / r.length_m - 1)
-    return np.array(out)
+    return _stride_errors(kin, cam, t, f * g, t_range)
 
 
 def walk_cases(people, speeds, quick: bool):
