@@ -178,6 +178,8 @@ class SlipOpticalFlowStride(Algorithm):
         ``clearance_converged`` and ``clearance_gain``, the fixed point's gain g; a gain of 0.5 or more, the
         fixed point doubling any error of the scale (``MAX_CLEARANCE_AMPLIFICATION``), or none computed, flags
         the fit "gain").
+    frame_interval_s_ : the frame interval the model's flow was predicted over (``frame_interval_s``, or the flow's
+        sample spacing; 0: the instantaneous flow).
 
     Notes
     -----
@@ -251,7 +253,7 @@ class SlipOpticalFlowStride(Algorithm):
                                                                      else clearance_stride_m), dt_s=dt_s)
         if kin.heel_m[:, 1].min() < -0.1 or not np.isfinite(kin.distance_m).all():
             return None  # the swing foot goes through the floor, or the camera looks above the horizon
-        interval = self.frame_interval_s if self.frame_interval_s is not None else getattr(self, "_sample_interval_s", None)
+        interval = getattr(self, "frame_interval_s_", self.frame_interval_s)  # before a fit: as given
         return kin.t_s, simulate_flow(kin, self.focal_px, interval or None), kin.length_m, kin.duration_s
 
     def _clearance_m(self, stride_m: float) -> float:
@@ -322,7 +324,8 @@ class SlipOpticalFlowStride(Algorithm):
                  "no stride estimated")
             return self
         rate_hz = 1.0 / float(np.median(np.diff(t)))
-        self._sample_interval_s = 1.0 / rate_hz  # one flow sample per frame pair: the frame interval
+        # one flow sample per frame pair: their spacing is the frame interval
+        self.frame_interval_s_ = 1.0 / rate_hz if self.frame_interval_s is None else self.frame_interval_s
         cadence_hz = 2.0 / float(np.median(segs.t_end_s - segs.t_start_s))  # steps per second
         if rate_hz < 2.0 * cadence_hz:
             warn(f"SlipOpticalFlowStride: flow at {rate_hz:.1f} Hz is below twice the cadence "
