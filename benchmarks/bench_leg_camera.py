@@ -182,6 +182,20 @@ def _matched(est, kin, side="left", t_range=None) -> tuple[np.ndarray, int]:
     return np.array(out).reshape(-1, 3), len(tl)
 
 
+def _true_camera_pose(kin, cam, t) -> tuple[np.ndarray, np.ndarray]:
+    """The rendered walk's camera position (m) and its segment's rotation (camera axes in the columns) at ``t``."""
+    knee = np.asarray(kin.joint_positions_m(t)[f"knee_{cam.side}"], float)
+    rot = np.asarray(kin.segment_rotation(t, cam.segment), float)
+    return knee + cam.distance_from_knee_m * rot[:, :, 2], rot
+
+
+def _true_metres_per_flow(kin, cam, t) -> np.ndarray:
+    """h / cos^2(theta) of the rendered walk's camera at ``t`` (its height over the floor and its optical axis
+    from the vertical): the flow at the image centre times this is the floor's speed times the focal length."""
+    position, rot = _true_camera_pose(kin, cam, t)
+    return position[:, 2] / rot[:, 2, 2] ** 2
+
+
 def _stride_errors(kin, cam, t, metres_px, t_range) -> np.ndarray:
     """Relative errors of the camera foot's true strides inside ``t_range`` read as (1/f) x the integral over each
     stride of ``metres_px`` (flow times h / cos^2(theta), m px/s)."""
@@ -203,11 +217,7 @@ def _true_geometry_errors(kin, cam, flow, t_range) -> np.ndarray:
     f = forward_flow(flow)
     ok = np.isfinite(f)
     f = np.interp(t, t[ok], f[ok])  # gaps bridged as the estimator bridges them
-    knee = np.asarray(kin.joint_positions_m(t)[f"knee_{cam.side}"], float)
-    axis = np.asarray(kin.segment_rotation(t, cam.segment), float)[:, :, 2]
-    height = knee[:, 2] + cam.distance_from_knee_m * axis[:, 2]
-    g = height / axis[:, 2] ** 2
-    return _stride_errors(kin, cam, t, f * g, t_range)
+    return _stride_errors(kin, cam, t, f * _true_metres_per_flow(kin, cam, t), t_range)
 
 
 def _true_displacement_errors(kin, cam, flow, t_range) -> np.ndarray:
@@ -217,22 +227,13 @@ def _true_displacement_errors(kin, cam, flow, t_range) -> np.ndarray:
     predicts this displacement (``SlipOpticalFlowStride.frame_interval_s``)."""
     t = flow.t_s.to_numpy()
     dt = flow.dt_s.to_numpy()
-
-    def pose(tq):
-        knee = np.asarray(kin.joint_positions_m(tq)[f"knee_{cam.side}"], float)
-        rot = np.asarray(kin.segment_rotation(tq, cam.segment), float)
-        return knee + cam.distance_from_knee_m * rot[:, :, 2], rot
-
-    c0, r0 = pose(t - 0.5 * dt)
-    c1, r1 = pose(t + 0.5 * dt)
+    c0, r0 = _true_camera_pose(kin, cam, t - 0.5 * dt)
+    c1, r1 = _true_camera_pose(kin, cam, t + 0.5 * dt)
     axis = r0[:, :, 2]
     ground = c0 - (c0[:, 2] / axis[:, 2])[:, None] * axis  # floor point on the optical axis
     xc = np.einsum("nji,nj->ni", r1, ground - c1)  # in the camera frame at the interval's end
     f = -cam.focal_px * xc[:, 0] / xc[:, 2] / dt  # forward flow, px/s
-    mid = pose(t)[1][:, :, 2]
-    height = np.asarray(kin.joint_positions_m(t)[f"knee_{cam.side}"], float)[:, 2] + cam.distance_from_knee_m * mid[:, 2]
-    g = height / mid[:, 2] ** 2
-    return _stride_errors(kin, cam, t, f * g, t_range)
+    return _stride_errors(kin, cam, t, f * _true_metres_per_flow(kin, cam, t), t_range)
 
 
 def walk_cases(people, speeds, quick: bool):
