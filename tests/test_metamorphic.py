@@ -15,7 +15,7 @@ from conftest import DATASETS, make_imu
 from pdr.errors import collect_warnings
 from pdr.eval.evaluate import evaluate_run
 from pdr.io.importers import import_recordings
-from pdr.io.recording import ACC_COLUMNS, GYR_COLUMNS, Recording, load_recording, save_recording
+from pdr.io.recording import ACC_COLUMNS, GYR_COLUMNS, TIME_COLUMNS, Recording, load_recording, save_recording
 from pdr.pipelines.run import run_recording
 from pdr.sim import simulate
 from pdr.steps import WaveletStepDetection
@@ -25,7 +25,7 @@ HUMOLIRE = DATASETS / "humolire_phone_landmarks" / "data" / "imus" / "1" / "squa
 
 
 def _shifted(df: pd.DataFrame, dt: float) -> pd.DataFrame:
-    return df.assign(**{c: df[c] + dt for c in ("t_s", "t_start_s", "t_end_s") if c in df.columns})
+    return df.assign(**{c: df[c] + dt for c in TIME_COLUMNS if c in df.columns})
 
 
 def test_reference_times_on_an_epoch_clock_survive_save_and_load(tmp_path):
