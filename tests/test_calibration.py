@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -15,7 +16,7 @@ from pdr.cli.main import main
 from pdr.constants import GRAVITY_MPS2
 from pdr.errors import InputError, collect_warnings
 from pdr.io.recording import Recording, load_recording, save_recording
-from pdr.step_length import RegressionStepLength, ZijlstraStepLength, load_model
+from pdr.step_length import RegressionStepLength, ZijlstraStepLength, load_model, save_model
 from conftest import warns
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -232,3 +233,67 @@ def test_cli_calibrate_says_which_gate_failed(tmp_path, capsys):
     errors = [line for line in capsys.readouterr().err.splitlines() if line.startswith("error:")]
     assert len(errors) == 1 and "fail the accuracy gate h_acc_m <= 10 m" in errors[0], errors
     assert not (tmp_path / "m.json").exists()
+
+
+# ------------------------------------------------------------------------------------------------ leg-camera scale
+def _camera_strides(t_contacts: np.ndarray, length_m: float) -> pd.DataFrame:
+    return pd.DataFrame({"t_start_s": t_contacts[:-1], "t_end_s": t_contacts[1:], "foot": "left",
+                         "length_m": length_m, "length_std_m": 0.1, "source": "leg_camera"})
+
+
+def test_leg_camera_scale_from_known_segments():
+    from pdr.pipelines.calibrate import leg_camera_scale
+
+    steps = pd.DataFrame({"t_s": 1.0 + 0.5 * np.arange(41)})  # 41 steps of 0.7 m (28.7 m) at 2 steps/s
+    strides = _camera_strides(steps.t_s.to_numpy()[::2], 1.4 * 1.1)  # the camera foot's contacts, 10% long
+    segs = pd.DataFrame({"rec_index": 0, "t_start_s": [1.0, 6.0, 11.0], "t_end_s": [6.0, 11.0, 21.0],
+                         "n_steps": [10.0, 10.0, 20.0], "distance_m": [7.0, 7.0, 14.0], "used": True})
+    out = leg_camera_scale([strides], [steps], segs)
+    assert out["length_scale"] == pytest.approx(1 / 1.1, rel=1e-6) and out["n_segments"] == 3
+    assert out["length_scale_std"] == pytest.approx(0.0, abs=1e-9) and out["distance_m"] == 28.0
+    whole = pd.DataFrame({"rec_index": [0], "t_start_s": [1.0], "t_end_s": [21.0], "n_steps": [41.0],
+                          "distance_m": [28.7], "used": [True]})  # --distance-m: every step, the first one's too
+    out = leg_camera_scale([strides], [steps], whole)
+    assert out["length_scale"] == pytest.approx(1 / 1.1, rel=0.01) and out["length_scale_std"] is None
+    assert leg_camera_scale([None], [steps], segs) is None  # no camera: nothing to calibrate
+    with warns("not calibrated"):  # the camera films only the first 5 s: no segment covered
+        assert leg_camera_scale([strides[strides.t_end_s <= 6.0]], [steps], segs.iloc[1:]) is None
+    with warns("not stored"):  # strides twice the known distance: a wrong camera.toml, not a body to calibrate
+        assert leg_camera_scale([_camera_strides(steps.t_s.to_numpy()[::2], 2.8)], [steps], segs) is None
+
+
+def test_model_file_leg_camera_scale_is_checked(tmp_path):
+    from pdr.step_length import leg_camera_length_scale
+
+    path = tmp_path / "model.json"
+    save_model(ZijlstraStepLength.population(), path, {"length_scale": 0.95, "n_strides": 30})
+    assert leg_camera_length_scale(path) == 0.95
+    save_model(ZijlstraStepLength.population(), path)
+    assert leg_camera_length_scale(path) is None
+    for bad in (0.2, "0.95", None, float("nan")):
+        doc = json.loads(path.read_text())
+        doc["leg_camera"] = {"length_scale": bad}
+        path.write_text(json.dumps(doc))
+        with pytest.raises(InputError, match="leg_camera.length_scale"):
+            leg_camera_length_scale(path)
+
+
+def test_cli_calibrate_a_leg_camera_walk_of_known_length(tmp_path, capsys):
+    from pdr.sim import simulate_to_disk
+
+    text = (ROOT / "configs" / "sim" / "leg_camera.toml").read_text()
+    assert tomllib.loads(text)["segment"][1]["duration_s"] == 40.0
+    config = tmp_path / "walk.toml"
+    config.write_text(text.replace("duration_s = 40.0", "duration_s = 16.0"))  # the same person, a shorter walk
+    rec = simulate_to_disk(config, tmp_path / "walk", seed=2)
+    truth = load_recording(rec).reference
+    assert main(["calibrate", str(rec), "-o", str(tmp_path / "model.json"),
+                 "--distance-m", str(truth["summary"]["distance_m"])]) == 0
+    assert "leg camera: " in capsys.readouterr().out
+    doc = json.loads((tmp_path / "model.json").read_text())
+    assert 0.85 < doc["leg_camera"]["length_scale"] < 0.97  # this person's strides read 3-15% long uncalibrated
+    assert main(["run", str(rec), "-o", str(tmp_path / "out"), "--model", str(tmp_path / "model.json"), "--no-gnss"]) == 0
+    strides = pd.read_csv(tmp_path / "out" / "strides.csv")
+    ref = truth["strides"][truth["strides"].foot == "left"]
+    k = np.abs(ref.t_end_s.to_numpy()[None, :] - strides.t_end_s.to_numpy()[:, None]).argmin(axis=1)
+    assert abs(np.mean(strides.length_m.to_numpy() / ref.length_m.to_numpy()[k] - 1)) < 0.02

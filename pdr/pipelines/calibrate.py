@@ -10,8 +10,11 @@ user's own distance information).
 Load each recording, detect its steps, take the prior of the person (``[step_length]``, else the body-based model of
 the first recording's ``[subject]`` and placement, :func:`pdr.step_length.body_model`), run
 :class:`pdr.calibration.AdaptiveKalmanCalibration` over all of them, and write the calibrated model with how many
-steps and metres it saw (atomically). Configuration sections: ``[steps]``, ``[heading]`` (step detection),
-``[step_length]``, ``[calibration]`` (AdaptiveKalmanCalibration parameters), ``[gnss]`` (as ``pdr run``).
+steps and metres it saw (atomically). Recordings with a leg camera also calibrate its strides' length scale on the
+same segments of known distance (:func:`leg_camera_scale`; the model file's ``leg_camera``, which ``pdr run
+--model`` applies). Configuration sections: ``[steps]``, ``[heading]`` (step detection), ``[step_length]``,
+``[calibration]`` (AdaptiveKalmanCalibration parameters), ``[gnss]`` (as ``pdr run``), ``[flow]`` and ``[slip_of]``
+(the leg camera, as ``pdr run``; its ``length_scale`` is what is calibrated, so it is not read).
 """
 
 from __future__ import annotations
@@ -24,16 +27,82 @@ import pandas as pd
 from pdr.calibration import AdaptiveKalmanCalibration
 from pdr.calibration.segments import landmark_distances, trajectory_distances
 from pdr.config import load_config
-from pdr.errors import InputError
+from pdr.errors import InputError, warn
 from pdr.io.recording import load_recording, read_csv
+from pdr.pipelines.leg_camera import camera_strides
 from pdr.pipelines.pipeline import gnss_local, gnss_settings
 from pdr.pipelines.steps import detect_steps
 from pdr.step_length import choose_model, save_model
+from pdr.step_length.io import LEG_CAMERA_SCALE_RANGE
 
 KNOWN_DISTANCE_REL_STD = 0.01  # a walk "of known length" follows its measured line to about 1%
 LANDMARK_POSITION_STD_M = 0.3  # a landmark passing: the click lags the passing by ~0.2 s at ~1.5 m/s
 TRAJECTORY_POSITION_STD_M = 0.05  # a reference system (motion capture, RTK, a surveyed path)
 TRAJECTORY_SEGMENT_S = 30.0
+MIN_CAMERA_COVERAGE = 0.8  # a segment calibrates the camera when its strides cover 80% of the segment's steps
+
+
+def _step_index(t_s: np.ndarray, step_t_s: np.ndarray) -> np.ndarray:
+    """Fractional step count at times ``t_s``: step k (0-based) covers ``(k - 1, k]`` (it ends at its contact), so the
+    time before the first contact is extrapolated by the first step's duration."""
+    knots_t = np.concatenate([[2 * step_t_s[0] - step_t_s[1]], step_t_s])
+    return np.interp(t_s, knots_t, np.arange(-1, len(step_t_s), dtype=float))
+
+
+def leg_camera_scale(strides_list: list[pd.DataFrame | None], steps_list: list[pd.DataFrame],
+                     segments: pd.DataFrame) -> dict | None:
+    """The leg camera's length scale from segments of known distance: known metres / camera metres over them.
+
+    A segment covers steps ``(k_first - 1 + fraction, ...]``: the same steps the step model is fitted on (the
+    ``segments`` of :class:`AdaptiveKalmanCalibration`, ``model_segments_``). A camera stride adds the part of its
+    length that falls on those steps (its span in fractional steps, two steps per stride); a segment whose strides
+    cover at least :data:`MIN_CAMERA_COVERAGE` of its steps counts, its camera metres divided by the coverage. The
+    scale is the ratio of the sums (a ratio estimator: each metre weighs the same); its std is the spread of the
+    segments' own ratios over the square root of their number (three segments or more), else None.
+    Returns None when no recording has camera strides; raises nothing, warns when no segment is covered.
+    """
+    known, camera, ratios, n_strides = [], [], [], 0
+    have_strides = False
+    for r, (strides, steps) in enumerate(zip(strides_list, steps_list)):
+        if strides is None or len(steps) < 2:
+            continue
+        strides = strides[np.isfinite(strides["length_m"].to_numpy(float))]
+        have_strides = have_strides or len(strides) > 0
+        if strides.empty:
+            continue
+        t_step = steps["t_s"].to_numpy(float)
+        lo = _step_index(strides["t_start_s"].to_numpy(float), t_step)
+        hi = _step_index(strides["t_end_s"].to_numpy(float), t_step)
+        length = strides["length_m"].to_numpy(float)
+        for seg in segments[(segments["rec_index"] == r) & segments["used"]].itertuples(index=False):
+            if np.isfinite(seg.t_start_s) and seg.n_steps != len(t_step):
+                a, b = _step_index(np.array([seg.t_start_s, seg.t_end_s]), t_step)
+            else:  # the whole walk: every step, the first one's stretch before its contact too
+                a, b = -1.0, len(t_step) - 1.0
+            overlap = np.clip(np.minimum(hi, b) - np.maximum(lo, a), 0.0, None)
+            coverage = float(overlap.sum() / (b - a))
+            if coverage < MIN_CAMERA_COVERAGE:
+                continue
+            metres = float(np.sum(length * overlap / np.maximum(hi - lo, 1e-9))) / coverage
+            known.append(float(seg.distance_m))
+            camera.append(metres)
+            ratios.append(float(seg.distance_m) / metres)
+            n_strides += int(np.count_nonzero(overlap > 0))
+    if not have_strides:
+        return None
+    if not known:
+        warn(f"calibrate: no segment of known distance is {MIN_CAMERA_COVERAGE:.0%} covered by leg-camera strides; "
+             f"the camera's length scale is not calibrated")
+        return None
+    scale = sum(known) / sum(camera)
+    lo_ok, hi_ok = LEG_CAMERA_SCALE_RANGE
+    if not lo_ok <= scale <= hi_ok:
+        warn(f"calibrate: the leg camera's strides read {1.0 / scale:.2f} x the known distance (scale {scale:.3f}, "
+             f"outside [{lo_ok:.3g}, {hi_ok:.3g}]): check camera.toml and [subject]; the scale is not stored")
+        return None
+    std = float(np.std(ratios, ddof=1) / np.sqrt(len(ratios))) if len(ratios) >= 3 else None
+    return {"length_scale": scale, "length_scale_std": std, "n_segments": len(known), "n_strides": n_strides,
+            "distance_m": round(sum(known), 2)}
 
 
 def _why_no_segment(steps_list, gnss_list, akf) -> str:
@@ -104,8 +173,11 @@ def calibrate_recordings(recs: list[Path], out: Path, config_path=None, *, dista
         raise InputError(f"calibrate: expected GNSS (gnss.csv) or a known distance (--distance-m, --landmarks, "
                          f"--trajectory) for every recording, found neither for {', '.join(without)}")
     model, choice = choose_model(config, recordings[0].subject, recordings[0].placement)
-    steps_list, gnss_list, subjects = [], [], []
+    camera_config = {"flow": config.get("flow", {}),
+                     "slip_of": {k: v for k, v in (config.get("slip_of") or {}).items() if k != "length_scale"}}
+    steps_list, gnss_list, subjects, strides_list = [], [], [], []
     for rec, (kind, _) in zip(recordings, sources):
+        strides_list.append(camera_strides(rec, camera_config))
         steps = model.prepare(detect_steps(rec, config), rec)
         gnss = None
         if kind == "gnss":
@@ -122,12 +194,15 @@ def calibrate_recordings(recs: list[Path], out: Path, config_path=None, *, dista
         found = ", ".join(f"{n} {why}" for why, n in reasons.items()) or _why_no_segment(steps_list, gnss_list, akf)
         raise InputError(f"calibrate: expected segments of walking of known length (GNSS fixes, distances), found none "
                          f"usable in {len(recordings)} recording(s): {found}")
-    save_model(akf.model_, out, n_steps=int(round(akf.n_steps_)), distance_m=round(akf.distance_m_, 2), n_segments=int(segs["used"].sum()),
+    camera = leg_camera_scale(strides_list, steps_list, segs)
+    save_model(akf.model_, out, camera, n_steps=int(round(akf.n_steps_)), distance_m=round(akf.distance_m_, 2), n_segments=int(segs["used"].sum()),
                n_segments_rejected=int((~segs["used"]).sum()), updated=akf.updated_,
                recordings=[rec.id for rec in recordings], sources=[kind for kind, _ in sources], prior=choice,
                calibration=akf.get_params())
     params = ", ".join(f"{n}={getattr(akf.model_, n):.4g}" for n in akf.model_.theta_names)
     what = "all parameters" if akf.updated_ == "all" else "mainly the level (one walking frequency)"
     kinds = ", ".join(sorted({kind for kind, _ in sources}))
+    camera_line = ("" if camera is None else f"; leg camera: {camera['n_strides']} strides over {camera['distance_m']:.1f} m,"
+                   f" length_scale={camera['length_scale']:.4g}")
     return (f"calibrated {akf.model_.name} model on {len(recordings)} recording(s) ({kinds}): {akf.n_steps_:.0f} steps, "
-            f"{akf.distance_m_:.1f} m of walking in {int(segs['used'].sum())} segments, {what}: {params} -> {out}")
+            f"{akf.distance_m_:.1f} m of walking in {int(segs['used'].sum())} segments, {what}: {params}{camera_line} -> {out}")

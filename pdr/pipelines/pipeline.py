@@ -38,7 +38,7 @@ from pdr.pipelines.not_walking import drop_not_walking, gnss_only_trajectory, in
 from pdr.pipelines.steps import DETECTORS, make_detector, steps_table
 from pdr.signals import ImuSignals
 from pdr.signals.faults import SensorFaultDetection
-from pdr.step_length import choose_model
+from pdr.step_length import choose_model, leg_camera_length_scale
 from pdr.step_length.body import body_model
 from pdr.step_length.io import model_from_dict, model_to_dict
 from pdr.step_length.models import MAX_STEP_M, StepLengthModel
@@ -209,7 +209,8 @@ class Pipeline(Algorithm):
     def from_config(cls, config: str | Path | dict[str, Any] | None = None, *, model_path: str | Path | None = None,
                     use_gnss: bool = True, config_dir: str | Path | None = None) -> "Pipeline":
         """The pipeline of a configuration (a TOML file, its sections as a dict, or None for the defaults) and a step
-        model file (``pdr run --model``). A relative ``[gait_forms] forms`` path is relative to ``config_dir``
+        model file (``pdr run --model``; its leg-camera length scale, if any, goes to ``[slip_of]`` unless that
+        section sets one). A relative ``[gait_forms] forms`` path is relative to ``config_dir``
         (default: the configuration file's folder)."""
         base_dir = Path(config_dir) if config_dir is not None else None
         if config is None or isinstance(config, (str, Path)):
@@ -232,9 +233,13 @@ class Pipeline(Algorithm):
             for key in ("forms", "forms_file"):
                 if base_dir is not None and isinstance(forms.get(key), str) and not Path(forms[key]).is_absolute():
                     forms[key] = str(base_dir / forms[key])
+        slip_of = dict(config.get("slip_of", {}))
+        camera_scale = leg_camera_length_scale(model_path) if model_path is not None else None
+        if camera_scale is not None and "length_scale" not in slip_of:  # the configuration's own scale wins
+            slip_of["length_scale"] = camera_scale
         return cls(steps=steps, heading=AttitudeStepHeading.from_config(config.get("heading")), step_length=model,
                    step_length_choice=choice, gait_forms=forms, foot=dict(config.get("foot", {})),
-                   leg_camera={"flow": dict(config.get("flow", {})), "slip_of": dict(config.get("slip_of", {}))},
+                   leg_camera={"flow": dict(config.get("flow", {})), "slip_of": slip_of},
                    faults=SensorFaultDetection.from_config(config.get("faults")), fusion=fusion, gnss=settings,
                    use_gnss=use_gnss)
 

@@ -5,7 +5,11 @@ The file::
 
     {"pdr_model_version": 1, "model": "regression",
      "params": {"a_m": ..., "b_m_per_hz": ..., "c_m_per_m2ps4": ..., "residual_std_m": ..., "covariance": [[...]]},
-     "info": {"n_steps": ..., "distance_m": ..., ...}}
+     "info": {"n_steps": ..., "distance_m": ..., ...},
+     "leg_camera": {"length_scale": ..., ...}}
+
+``leg_camera`` (optional, from a calibration walk filmed by a leg camera) holds the camera strides' length scale,
+which ``pdr run --model`` gives the SLIP-OF estimator (:func:`leg_camera_length_scale`).
 
 Example
 -------
@@ -30,19 +34,23 @@ from pdr.step_length.models import MODELS, RegressionStepLength, StepLengthModel
 MODEL_VERSION = 1
 
 
-def model_to_dict(model: StepLengthModel, **info: Any) -> dict[str, Any]:
+def model_to_dict(model: StepLengthModel, leg_camera: dict[str, Any] | None = None, **info: Any) -> dict[str, Any]:
     """The JSON document of a model (see the module docstring)."""
     if not isinstance(model, StepLengthModel):
         raise InputError(f"save_model: expected a step-length model, found {type(model).__name__}")
     model._check_params()
-    return {"pdr_model_version": MODEL_VERSION, "model": model.name, "params": jsonable(model.get_params(), float_digits=None),
-            "info": jsonable({"pdr_version": __version__, **info}, float_digits=None)}
+    doc = {"pdr_model_version": MODEL_VERSION, "model": model.name, "params": jsonable(model.get_params(), float_digits=None),
+           "info": jsonable({"pdr_version": __version__, **info}, float_digits=None)}
+    if leg_camera is not None:
+        doc["leg_camera"] = jsonable(leg_camera, float_digits=None)
+    return doc
 
 
-def save_model(model: StepLengthModel, path: str | Path, **info: Any) -> Path:
-    """Write ``model`` (and free-form ``info``: steps and metres seen, recordings, ...) as JSON, atomically."""
+def save_model(model: StepLengthModel, path: str | Path, leg_camera: dict[str, Any] | None = None, **info: Any) -> Path:
+    """Write ``model`` (with the leg camera's calibration, if any, and free-form ``info``: steps and metres seen,
+    recordings, ...) as JSON, atomically."""
     path = Path(path)
-    write_text(path, json.dumps(model_to_dict(model, **info), indent=2, sort_keys=True) + "\n")
+    write_text(path, json.dumps(model_to_dict(model, leg_camera, **info), indent=2, sort_keys=True) + "\n")
     return path
 
 
@@ -67,6 +75,23 @@ def model_from_dict(doc: Any, what: str = "model") -> StepLengthModel:
     model = cls.from_config(params)
     model._check_params()
     return model
+
+
+LEG_CAMERA_SCALE_RANGE = (2.0 / 3.0, 1.5)  # a factor 1.5 either way: beyond any body model's error, a wrong mount
+
+
+def leg_camera_length_scale(path: str | Path) -> float | None:
+    """The leg camera's per-user length scale of a model file (its ``leg_camera`` object), None when it has none."""
+    what = f"model file {path}"
+    doc = read_json(path, what=what, missing="expected a JSON file from `pdr calibrate`, found nothing there")
+    section = doc.get("leg_camera") if isinstance(doc, dict) else None
+    if section is None:
+        return None
+    scale = section.get("length_scale") if isinstance(section, dict) else None
+    lo, hi = LEG_CAMERA_SCALE_RANGE
+    if isinstance(scale, bool) or not isinstance(scale, (int, float)) or not lo <= scale <= hi:
+        raise InputError(f"{what}: expected leg_camera.length_scale a number in [{lo:.3g}, {hi:.3g}], found {scale!r}")
+    return float(scale)
 
 
 def load_model(path: str | Path) -> StepLengthModel:
