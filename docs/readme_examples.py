@@ -5,7 +5,7 @@ An example is a fenced block right after a line ``<!-- example -->``; ``make tes
 the block is a command, run by bash in one scratch folder shared by all examples in README order, with this
 checkout's ``pdr`` first and ``configs/`` linked in; the lines after it, up to the next ``$ ``, are what it prints (stdout and stderr together).
 Speeds (``frames/s``) and the scratch folder's path are masked before comparing. A number with a decimal point
-matches within a relative 1e-3 (or half a unit of its last shown digit): the least-squares solvers stop at a tolerance,
+matches within a relative 1e-3 (or one unit of its last shown digit): the least-squares solvers stop at a tolerance,
 and another CPU's vector kernels move the 5th-7th digits (a final error 0.80884 m here, 0.8087587 m there); the
 text, the integers and every other digit still have to match.
 
