@@ -247,19 +247,22 @@ def test_leg_camera_scale_from_known_segments():
     steps = pd.DataFrame({"t_s": 1.0 + 0.5 * np.arange(41)})  # 41 steps of 0.7 m (28.7 m) at 2 steps/s
     strides = _camera_strides(steps.t_s.to_numpy()[::2], 1.4 * 1.1)  # the camera foot's contacts, 10% long
     segs = pd.DataFrame({"rec_index": 0, "t_start_s": [1.0, 6.0, 11.0], "t_end_s": [6.0, 11.0, 21.0],
-                         "n_steps": [10.0, 10.0, 20.0], "distance_m": [7.0, 7.0, 14.0], "used": True})
-    out = leg_camera_scale([strides], [steps], segs)
-    assert out["length_scale"] == pytest.approx(1 / 1.1, rel=1e-6) and out["n_segments"] == 3
-    assert out["length_scale_std"] == pytest.approx(0.0, abs=1e-9) and out["distance_m"] == 28.0
+                         "n_steps": [10.0, 10.0, 20.0], "distance_m": [7.0, 7.0, 14.0], "measured_std_m": 0.001,
+                         "used": True})
+    out = leg_camera_scale([strides], [steps], segs, prior_std=0.07)
+    # the known metres are exact (1 mm a step) and the strides' 10 cm each independent: close to 1 / 1.1
+    assert out["length_scale"] == pytest.approx(1 / 1.1, rel=0.005) and out["n_segments"] == 3
+    assert 0.005 < out["length_scale_std"] < 0.02 and out["distance_m"] == 28.0 and out["n_strides"] == 20
     whole = pd.DataFrame({"rec_index": [0], "t_start_s": [1.0], "t_end_s": [21.0], "n_steps": [41.0],
-                          "distance_m": [28.7], "used": [True]})  # --distance-m: every step, the first one's too
-    out = leg_camera_scale([strides], [steps], whole)
-    assert out["length_scale"] == pytest.approx(1 / 1.1, rel=0.01) and out["length_scale_std"] is None
-    assert leg_camera_scale([None], [steps], segs) is None  # no camera: nothing to calibrate
+                          "distance_m": [28.7], "measured_std_m": [0.001], "used": [True]})  # --distance-m: every step
+    assert leg_camera_scale([strides], [steps], whole, 0.07)["length_scale"] == pytest.approx(1 / 1.1, rel=0.01)
+    coarse = segs.assign(measured_std_m=0.5)  # phone-grade GNSS chords (5 m a segment): the prior holds the scale
+    assert leg_camera_scale([strides], [steps], coarse, 0.07)["length_scale"] > 0.97
+    assert leg_camera_scale([None], [steps], segs, 0.07) is None  # no camera: nothing to calibrate
     with warns("not calibrated"):  # the camera films only the first 5 s: no segment covered
-        assert leg_camera_scale([strides[strides.t_end_s <= 6.0]], [steps], segs.iloc[1:]) is None
+        assert leg_camera_scale([strides[strides.t_end_s <= 6.0]], [steps], segs.iloc[1:], 0.07) is None
     with warns("not stored"):  # strides twice the known distance: a wrong camera.toml, not a body to calibrate
-        assert leg_camera_scale([_camera_strides(steps.t_s.to_numpy()[::2], 2.8)], [steps], segs) is None
+        assert leg_camera_scale([_camera_strides(steps.t_s.to_numpy()[::2], 2.8)], [steps], segs, 10.0) is None
 
 
 def test_model_file_leg_camera_scale_is_checked(tmp_path):
