@@ -219,7 +219,7 @@ def _calibrated(results: list[dict]) -> list[dict]:
                 same = "same camera set-up as" if r["camera"] == cal["camera"] else "other camera set-up than"
                 # the flow-alone readings do not depend on the calibration: they stay with the uncalibrated rows
                 kept = {k: v for k, v in r.items() if not k.startswith("true_")}
-                out.append({**kept, **_score(est, r["kin"], cam, r["t_range"]),
+                out.append({**kept, **_score(est, r["kin"], cam, r["t_range"]), "uncalibrated": r["pairs"],
                             "calibration": f"{same} the calibration walk"})
     return out
 
@@ -302,6 +302,10 @@ def _group_rows(name: str, data: str, results: list[dict], splits: tuple[str, ..
     case = f"{name} ({len({r['spec'] for r in results})} people, {len(results)} walks, {len(pairs)} strides; {data})"
     anchor = f"10% ({THESIS}, 1.08 m vs 1.20 m, one trial)"
     rows.append(_row(case, "stride length MAE", 100 * np.mean(np.abs(rel)) if len(rel) else np.nan, "%", "<= 3", anchor))
+    if results and all("uncalibrated" in r for r in results):
+        before = np.concatenate([r["uncalibrated"] for r in results])
+        rows.append(_row(case, "stride length MAE of the same walks uncalibrated",
+                         100 * np.mean(np.abs(before[:, 0] / before[:, 1] - 1)), "%", "-", "-"))
     if worst is not None:
         w = results[worst]
         rows.append(_row(case, f"worst walk MAE ({w['spec'][0]:.2f} m, {w['speed']} m/s, {w['camera']}, {w['texture']})",
