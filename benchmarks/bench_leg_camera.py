@@ -10,7 +10,9 @@ proportion (Bogin & Varela-Silva 2010) and step-length law (``GaitUser``; health
 on three real floors (gravel, brick, grass), with two camera set-ups. The estimator is given what a user knows: the
 height and the leg length tape-measured (+-1 cm), the camera's mount distance below the knee measured (+-0.5 cm), the camera intrinsics; the
 segment lengths come from Winter's ratios (``SlipBody.from_user``). Each group also reports its strides read from the
-measured flow with the walks' true camera geometry: the flow's own error, apart from the model's.
+measured flow with the walks' true camera geometry: the flow's own error, apart from the model's, and its walks after
+a per-user calibration (``pdr.slip.fit.calibrate_slip_body``) on one walk of each person, a known distance over that
+walk's strides: the scale is fitted there once and the person's other walks are scored, never the calibration walk.
 """
 
 from __future__ import annotations
@@ -29,7 +31,7 @@ from pdr.sim.gait import WalkKinematics
 from pdr.sim.people import LEG_SCALE_SD, Body, GaitUser, plan_walk
 from pdr.sim.simulator import MEASURE_STD_M, MOUNT_STD_M
 from pdr.sim.route import Route
-from pdr.slip.fit import SlipOpticalFlowStride
+from pdr.slip.fit import SlipOpticalFlowStride, calibrate_slip_body
 from pdr.slip.model import SlipBody
 
 AREA = "leg_camera"
@@ -47,6 +49,9 @@ SPEEDS_MPS = (0.8, 1.2, 1.6)
 TUNING_PEOPLE = ((1.55, 11, "healthy"), (1.68, 12, "older"), (1.80, 13, "healthy"), (1.92, 14, "healthy"))
 TEST_PEOPLE = ((1.50, 21, "healthy"), (1.62, 22, "healthy"), (1.74, 23, "older"), (1.86, 24, "healthy"),
                (1.95, 25, "healthy"))
+# the per-user calibration walk: each person's walk nearest this speed (the slower on a tie), whatever its camera and
+# floor - a comfortable pace, where a user walks a known distance; declared before any calibrated walk was scored
+CALIBRATION_SPEED_MPS = 1.2
 
 
 def _row(case, metric, ours, unit, target, anchor):
@@ -182,6 +187,43 @@ def _matched(est, kin, side="left", t_range=None) -> tuple[np.ndarray, int]:
     return np.array(out).reshape(-1, 3), len(tl)
 
 
+def _score(est, kin, cam, t_range) -> dict:
+    """The fitted walk's matched (estimated, true, sigma) strides, its true strides in the flow and, of them, those
+    in failed fits."""
+    pairs, n_true = _matched(est, kin, cam.side, t_range)
+    failed = 0
+    if len(est.fits_) and "flag" in est.fits_:
+        failed = int(round(n_true * est.fits_.flag.astype(bool).to_numpy().mean()))
+    return dict(pairs=pairs, n_true=n_true, n_failed=failed)
+
+
+def _calibrated(results: list[dict]) -> list[dict]:
+    """Each person's walks other than the calibration walk (``CALIBRATION_SPEED_MPS``), fitted with the scale of
+    :func:`pdr.slip.fit.calibrate_slip_body` on that walk: its true length the mean true length of the strides the
+    estimator found there (a known distance over the same strides). The body and the scale carry over to the other
+    walks; the camera's intrinsics and mount are those of each walk's own set-up. A person whose calibration walk
+    gives no stride has no calibrated walk."""
+    out = []
+    for spec in dict.fromkeys(r["spec"] for r in results):
+        walks = [r for r in results if r["spec"] == spec]
+        cal = min(walks, key=lambda r: (abs(r["speed"] - CALIBRATION_SPEED_MPS), r["speed"]))
+        if not len(cal["pairs"]):
+            continue
+        p, flow = person(*spec), cal["flow"]
+        scale = calibrate_slip_body(estimator_for(p, CAMERAS[cal["camera"]]), flow.t_s.to_numpy(), forward_flow(flow),
+                                    flow.quality.to_numpy(), true_length_m=float(cal["pairs"][:, 1].mean())).length_scale
+        for r in walks:
+            if r is not cal:
+                cam = CAMERAS[r["camera"]]
+                est = _fit(estimator_for(p, cam, length_scale=scale), r["flow"])
+                same = "same camera set-up as" if r["camera"] == cal["camera"] else "other camera set-up than"
+                # the flow-alone readings do not depend on the calibration: they stay with the uncalibrated rows
+                kept = {k: v for k, v in r.items() if not k.startswith("true_")}
+                out.append({**kept, **_score(est, r["kin"], cam, r["t_range"]), "uncalibrated": r["pairs"],
+                            "calibration": f"{same} the calibration walk"})
+    return out
+
+
 def _true_camera_pose(kin, cam, t) -> tuple[np.ndarray, np.ndarray]:
     """The rendered walk's camera position (m) and its segment's rotation (camera axes in the columns) at ``t``."""
     knee = np.asarray(kin.joint_positions_m(t)[f"knee_{cam.side}"], float)
@@ -246,7 +288,10 @@ def walk_cases(people, speeds, quick: bool):
     return out
 
 
-def _group_rows(name: str, data: str, results: list[dict]) -> list[dict]:
+def _group_rows(name: str, data: str, results: list[dict], splits: tuple[str, ...] = ("camera", "texture")
+                ) -> list[dict]:
+    """The group's rows; ``splits``: the walk keys whose values get a stride MAE row each (a camera's name, a floor's,
+    or a calibrated walk's camera against its calibration walk's)."""
     rows = []
     pairs = np.concatenate([r["pairs"] for r in results]) if results else np.zeros((0, 3))
     n_true = sum(r["n_true"] for r in results)
@@ -257,6 +302,10 @@ def _group_rows(name: str, data: str, results: list[dict]) -> list[dict]:
     case = f"{name} ({len({r['spec'] for r in results})} people, {len(results)} walks, {len(pairs)} strides; {data})"
     anchor = f"10% ({THESIS}, 1.08 m vs 1.20 m, one trial)"
     rows.append(_row(case, "stride length MAE", 100 * np.mean(np.abs(rel)) if len(rel) else np.nan, "%", "<= 3", anchor))
+    if results and all("uncalibrated" in r for r in results):
+        before = np.concatenate([r["uncalibrated"] for r in results])
+        rows.append(_row(case, "stride length MAE of the same walks uncalibrated",
+                         100 * np.mean(np.abs(before[:, 0] / before[:, 1] - 1)), "%", "-", "-"))
     if worst is not None:
         w = results[worst]
         rows.append(_row(case, f"worst walk MAE ({w['spec'][0]:.2f} m, {w['speed']} m/s, {w['camera']}, {w['texture']})",
@@ -270,13 +319,14 @@ def _group_rows(name: str, data: str, results: list[dict]) -> list[dict]:
             p = np.concatenate(sel)
             rows.append(_row(case, f"stride length bias at {v} m/s", 100 * np.mean(p[:, 0] / p[:, 1] - 1), "%",
                              "within +-2", "-"))
-    for key, value, label in [("camera", c, f"{c} camera") for c in CAMERAS] + [("texture", t, f"{t} floor") for t in TEXTURES]:
+    labels = dict(camera="{} camera", texture="{} floor", calibration="{}")
+    for key, value in [(k, v) for k in splits for v in dict.fromkeys(r[k] for r in results)]:
         sel = [r["pairs"] for r in results if r[key] == value and len(r["pairs"])]
         if sel:
             p = np.concatenate(sel)
-            rows.append(_row(case, f"stride length MAE, {label}", 100 * np.mean(np.abs(p[:, 0] / p[:, 1] - 1)), "%",
-                             "-", "-"))
-    geo = np.concatenate([r["true_geometry"] for r in results]) if results else np.zeros(0)
+            rows.append(_row(case, f"stride length MAE, {labels[key].format(value)}",
+                             100 * np.mean(np.abs(p[:, 0] / p[:, 1] - 1)), "%", "-", "-"))
+    geo = np.concatenate([r["true_geometry"] for r in results if "true_geometry" in r] or [np.zeros(0)])
     if len(geo):
         rows.append(_row(case, "flow error alone: stride from the measured flow with the true camera geometry, bias",
                          100 * np.mean(geo), "%", "-", "-"))
@@ -286,6 +336,8 @@ def _group_rows(name: str, data: str, results: list[dict]) -> list[dict]:
     if len(pairs):
         z = np.abs(pairs[:, 0] - pairs[:, 1]) / pairs[:, 2]
         rows.append(_row(case, "errors within 2 sigma", 100 * np.mean(z < 2), "%", "~95", "a Gaussian sigma covers 95% at 2 sigma"))
+        rms_ratio = np.sqrt(np.mean((pairs[:, 0] - pairs[:, 1]) ** 2) / np.mean(pairs[:, 2] ** 2))
+        rows.append(_row(case, "RMS error over RMS sigma", rms_ratio, "-", "~1", "an honest sigma: 1"))
     return rows
 
 
@@ -311,15 +363,14 @@ def run(quick: bool = False) -> list[dict]:
             est = _fit(estimator_for(p, cam), flow)
             fit_times += est.fits_.time_s.tolist()
             t_range = (float(flow.t_s.iloc[0]), float(flow.t_s.iloc[-1]))
-            pairs, n_true = _matched(est, kin, cam.side, t_range)
-            failed = 0
-            if len(est.fits_) and "flag" in est.fits_:
-                bad = est.fits_.flag.astype(bool).to_numpy()
-                failed = int(round(n_true * bad.mean()))
-            results.append(dict(spec=spec, speed=v, camera=cam_name, texture=tex, pairs=pairs, n_true=n_true,
-                                n_failed=failed, true_geometry=_true_geometry_errors(kin, cam, flow, t_range),
-                                true_displacement=_true_displacement_errors(kin, cam, flow, t_range)))
+            results.append(dict(spec=spec, speed=v, camera=cam_name, texture=tex, **_score(est, kin, cam, t_range),
+                                true_geometry=_true_geometry_errors(kin, cam, flow, t_range),
+                                true_displacement=_true_displacement_errors(kin, cam, flow, t_range),
+                                flow=flow, kin=kin, t_range=t_range))
         rows += _group_rows(name, data, results)
+        rows += _group_rows(f"{name}, calibrated on one walk (each person's walk nearest {CALIBRATION_SPEED_MPS} m/s, "
+                            "whatever its camera and floor; not scored)", data, _calibrated(results),
+                            splits=("calibration", "texture"))
     # the thesis set-up: its Table 1 body (thigh 0.5 m; shank 0.6 m knee to ground; foot 0.2 m), about 1.20 m strides,
     # the Table 1 lengths handed over as a user's measurements
     height = 0.5 / Body(1.0).thigh_m
