@@ -11,8 +11,9 @@ on three real floors (gravel, brick, grass), with two camera set-ups. The estima
 height and the leg length tape-measured (+-1 cm), the camera's mount distance below the knee measured (+-0.5 cm), the camera intrinsics; the
 segment lengths come from Winter's ratios (``SlipBody.from_user``). Each group also reports its strides read from the
 measured flow with the walks' true camera geometry: the flow's own error, apart from the model's, and its walks after
-a per-user calibration (``pdr.slip.fit.calibrate_slip_body``) on one walk of each person, a known distance over that
-walk's strides: the scale is fitted there once and the person's other walks are scored, never the calibration walk.
+a per-user calibration (the scale ``pdr calibrate`` stores, ``pdr.slip.calibrated_length_scale``) on one walk of each
+person, a known distance over that walk's strides: the scale is fitted there once and the person's other walks are
+scored, never the calibration walk.
 """
 
 from __future__ import annotations
@@ -31,7 +32,8 @@ from pdr.sim.gait import WalkKinematics
 from pdr.sim.people import LEG_SCALE_SD, Body, GaitUser, plan_walk
 from pdr.sim.simulator import MEASURE_STD_M, MOUNT_STD_M
 from pdr.sim.route import Route
-from pdr.slip.fit import SlipOpticalFlowStride, calibrate_slip_body
+from pdr.pipelines.calibrate import KNOWN_DISTANCE_REL_STD
+from pdr.slip.fit import SlipOpticalFlowStride, calibrated_length_scale
 from pdr.slip.model import SlipBody
 
 AREA = "leg_camera"
@@ -198,20 +200,21 @@ def _score(est, kin, cam, t_range) -> dict:
 
 
 def _calibrated(results: list[dict]) -> list[dict]:
-    """Each person's walks other than the calibration walk (``CALIBRATION_SPEED_MPS``), fitted with the scale of
-    :func:`pdr.slip.fit.calibrate_slip_body` on that walk: its true length the mean true length of the strides the
-    estimator found there (a known distance over the same strides). The body and the scale carry over to the other
-    walks; the camera's intrinsics and mount are those of each walk's own set-up. A person whose calibration walk
-    gives no stride has no calibrated walk."""
+    """Each person's walks other than the calibration walk (``CALIBRATION_SPEED_MPS``), fitted with the scale
+    ``pdr calibrate`` would store (:func:`pdr.slip.calibrated_length_scale`) from that walk: its known length the true
+    length of the strides the estimator found there (a distance measured to 1%), against their fitted length at
+    scale 1. The body and the scale carry over to the other walks; the camera's intrinsics and mount are those of
+    each walk's own set-up. A person whose calibration walk gives no stride has no calibrated walk."""
     out = []
     for spec in dict.fromkeys(r["spec"] for r in results):
         walks = [r for r in results if r["spec"] == spec]
         cal = min(walks, key=lambda r: (abs(r["speed"] - CALIBRATION_SPEED_MPS), r["speed"]))
         if not len(cal["pairs"]):
             continue
-        p, flow = person(*spec), cal["flow"]
-        scale = calibrate_slip_body(estimator_for(p, CAMERAS[cal["camera"]]), flow.t_s.to_numpy(), forward_flow(flow),
-                                    flow.quality.to_numpy(), true_length_m=float(cal["pairs"][:, 1].mean())).length_scale
+        known = float(cal["pairs"][:, 1].sum())
+        scale, _ = calibrated_length_scale([known], [float(cal["pairs"][:, 0].sum())],
+                                           [KNOWN_DISTANCE_REL_STD * known], [0])
+        p = person(*spec)
         for r in walks:
             if r is not cal:
                 cam = CAMERAS[r["camera"]]
@@ -222,6 +225,21 @@ def _calibrated(results: list[dict]) -> list[dict]:
                 out.append({**kept, **_score(est, r["kin"], cam, r["t_range"]), "uncalibrated": r["pairs"],
                             "calibration": f"{same} the calibration walk"})
     return out
+
+
+def _walk_error_spread(results: list[dict]) -> tuple[float, float]:
+    """SD (%) of the walks' mean stride errors within a person (pooled) and of the people's means between them:
+    what :data:`pdr.slip.fit.SCALE_WALK_STD` and ``SCALE_PERSON_STD`` were read from (tuning group)."""
+    by_person: dict = {}
+    for r in results:
+        if len(r["pairs"]):
+            by_person.setdefault(r["spec"], []).append(100 * np.mean(r["pairs"][:, 0] / r["pairs"][:, 1] - 1))
+    groups = [np.array(v) for v in by_person.values() if len(v) >= 2]
+    if not groups:
+        return np.nan, np.nan
+    within = float(np.sqrt(sum(((g - g.mean()) ** 2).sum() for g in groups) / sum(len(g) - 1 for g in groups)))
+    means = np.array([g.mean() for g in groups])
+    return within, float(np.std(means, ddof=1)) if len(means) >= 2 else np.nan
 
 
 def _true_camera_pose(kin, cam, t) -> tuple[np.ndarray, np.ndarray]:
@@ -306,6 +324,10 @@ def _group_rows(name: str, data: str, results: list[dict], splits: tuple[str, ..
         before = np.concatenate([r["uncalibrated"] for r in results])
         rows.append(_row(case, "stride length MAE of the same walks uncalibrated",
                          100 * np.mean(np.abs(before[:, 0] / before[:, 1] - 1)), "%", "-", "-"))
+    elif results:
+        within, between = _walk_error_spread(results)
+        rows.append(_row(case, "walks' mean stride error, SD within a person (pooled)", within, "%", "-", "-"))
+        rows.append(_row(case, "people's mean stride error, SD between them", between, "%", "-", "-"))
     if worst is not None:
         w = results[worst]
         rows.append(_row(case, f"worst walk MAE ({w['spec'][0]:.2f} m, {w['speed']} m/s, {w['camera']}, {w['texture']})",

@@ -243,26 +243,33 @@ def _camera_strides(t_contacts: np.ndarray, length_m: float) -> pd.DataFrame:
 
 def test_leg_camera_scale_from_known_segments():
     from pdr.pipelines.calibrate import leg_camera_scale
+    from pdr.slip.fit import SCALE_PERSON_STD, SCALE_WALK_STD
 
     steps = pd.DataFrame({"t_s": 1.0 + 0.5 * np.arange(41)})  # 41 steps of 0.7 m (28.7 m) at 2 steps/s
     strides = _camera_strides(steps.t_s.to_numpy()[::2], 1.4 * 1.1)  # the camera foot's contacts, 10% long
     segs = pd.DataFrame({"rec_index": 0, "t_start_s": [1.0, 6.0, 11.0], "t_end_s": [6.0, 11.0, 21.0],
                          "n_steps": [10.0, 10.0, 20.0], "distance_m": [7.0, 7.0, 14.0], "measured_std_m": 0.001,
                          "used": True})
-    out = leg_camera_scale([strides], [steps], segs, prior_std=0.07)
-    # the known metres are exact (1 mm a step) and the strides' 10 cm each independent: close to 1 / 1.1
-    assert out["length_scale"] == pytest.approx(1 / 1.1, rel=0.005) and out["n_segments"] == 3
-    assert 0.005 < out["length_scale_std"] < 0.02 and out["distance_m"] == 28.0 and out["n_strides"] == 20
+    out = leg_camera_scale([strides], [steps], segs)
+    assert out["measured_ratio"] == pytest.approx(1 / 1.1, rel=1e-6) and out["n_segments"] == 3
+    # one walk of exactly known length moves the person's scale by w = person^2 / (person^2 + walk^2) of what it reads
+    w = SCALE_PERSON_STD ** 2 / (SCALE_PERSON_STD ** 2 + SCALE_WALK_STD ** 2)
+    assert out["length_scale"] - 1 == pytest.approx(w * (1 / 1.1 - 1), rel=0.01)
+    assert out["length_scale_std"] < SCALE_PERSON_STD and out["distance_m"] == 28.0 and out["n_strides"] == 20
     whole = pd.DataFrame({"rec_index": [0], "t_start_s": [1.0], "t_end_s": [21.0], "n_steps": [41.0],
                           "distance_m": [28.7], "measured_std_m": [0.001], "used": [True]})  # --distance-m: every step
-    assert leg_camera_scale([strides], [steps], whole, 0.07)["length_scale"] == pytest.approx(1 / 1.1, rel=0.01)
-    coarse = segs.assign(measured_std_m=0.5)  # phone-grade GNSS chords (5 m a segment): the prior holds the scale
-    assert leg_camera_scale([strides], [steps], coarse, 0.07)["length_scale"] > 0.97
-    assert leg_camera_scale([None], [steps], segs, 0.07) is None  # no camera: nothing to calibrate
+    assert leg_camera_scale([strides], [steps], whole)["measured_ratio"] == pytest.approx(1 / 1.1, rel=0.01)
+    coarse = segs.assign(measured_std_m=0.5)  # phone-grade GNSS chords (5 m a segment): the scale moves less
+    assert 1 > leg_camera_scale([strides], [steps], coarse)["length_scale"] > out["length_scale"]
+    three = pd.concat([segs.assign(rec_index=r) for r in range(3)])  # three walks reading the same: a firmer scale
+    many = leg_camera_scale([strides] * 3, [steps] * 3, three)
+    assert many["n_walks"] == 3 and many["length_scale"] < out["length_scale"]
+    assert many["length_scale_std"] < out["length_scale_std"]
+    assert leg_camera_scale([None], [steps], segs) is None  # no camera: nothing to calibrate
     with warns("not calibrated"):  # the camera films only the first 5 s: no segment covered
-        assert leg_camera_scale([strides[strides.t_end_s <= 6.0]], [steps], segs.iloc[1:], 0.07) is None
+        assert leg_camera_scale([strides[strides.t_end_s <= 6.0]], [steps], segs.iloc[1:]) is None
     with warns("not stored"):  # strides twice the known distance: a wrong camera.toml, not a body to calibrate
-        assert leg_camera_scale([_camera_strides(steps.t_s.to_numpy()[::2], 2.8)], [steps], segs, 10.0) is None
+        assert leg_camera_scale([_camera_strides(steps.t_s.to_numpy()[::2], 2.8)], [steps], segs) is None
 
 
 def test_model_file_leg_camera_scale_is_checked(tmp_path):
@@ -294,9 +301,12 @@ def test_cli_calibrate_a_leg_camera_walk_of_known_length(tmp_path, capsys):
                  "--distance-m", str(truth["summary"]["distance_m"])]) == 0
     assert "leg camera: " in capsys.readouterr().out
     doc = json.loads((tmp_path / "model.json").read_text())
-    assert 0.85 < doc["leg_camera"]["length_scale"] < 0.97  # this person's strides read 3-15% long uncalibrated
+    camera = doc["leg_camera"]
+    assert 0.85 < camera["measured_ratio"] < 0.97  # this person's strides read 3-15% long uncalibrated
+    assert camera["measured_ratio"] < camera["length_scale"] < 1.0  # one walk: part of the way
     assert main(["run", str(rec), "-o", str(tmp_path / "out"), "--model", str(tmp_path / "model.json"), "--no-gnss"]) == 0
     strides = pd.read_csv(tmp_path / "out" / "strides.csv")
     ref = truth["strides"][truth["strides"].foot == "left"]
     k = np.abs(ref.t_end_s.to_numpy()[None, :] - strides.t_end_s.to_numpy()[:, None]).argmin(axis=1)
-    assert abs(np.mean(strides.length_m.to_numpy() / ref.length_m.to_numpy()[k] - 1)) < 0.02
+    bias = np.mean(strides.length_m.to_numpy() / ref.length_m.to_numpy()[k] - 1)
+    assert abs(bias - (camera["length_scale"] / camera["measured_ratio"] - 1)) < 0.01  # the scale applied, no other

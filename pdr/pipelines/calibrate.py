@@ -29,11 +29,10 @@ from pdr.calibration.segments import landmark_distances, trajectory_distances
 from pdr.config import load_config
 from pdr.errors import InputError, warn
 from pdr.io.recording import load_recording, read_csv
-from pdr.fusion import FactorGraphFusion
-from pdr.fusion._linear import solve_stride_scales
 from pdr.pipelines.leg_camera import camera_strides
-from pdr.pipelines.pipeline import gnss_local, gnss_settings, make_fusion
+from pdr.pipelines.pipeline import gnss_local, gnss_settings
 from pdr.pipelines.steps import detect_steps
+from pdr.slip import calibrated_length_scale
 from pdr.step_length import choose_model, save_model
 from pdr.step_length.io import LEG_CAMERA_SCALE_RANGE
 
@@ -41,7 +40,6 @@ KNOWN_DISTANCE_REL_STD = 0.01  # a walk "of known length" follows its measured l
 LANDMARK_POSITION_STD_M = 0.3  # a landmark passing: the click lags the passing by ~0.2 s at ~1.5 m/s
 TRAJECTORY_POSITION_STD_M = 0.05  # a reference system (motion capture, RTK, a surveyed path)
 TRAJECTORY_SEGMENT_S = 30.0
-CAMERA_SOURCE = "leg_camera"  # the source name of the SLIP-OF strides, whose fusion prior the scale starts from
 MIN_CAMERA_COVERAGE = 0.8  # a segment calibrates the camera when its strides cover 80% of the segment's steps
 
 
@@ -53,19 +51,17 @@ def _step_index(t_s: np.ndarray, step_t_s: np.ndarray) -> np.ndarray:
 
 
 def leg_camera_scale(strides_list: list[pd.DataFrame | None], steps_list: list[pd.DataFrame],
-                     segments: pd.DataFrame, prior_std: float) -> dict | None:
+                     segments: pd.DataFrame) -> dict | None:
     """The leg camera's length scale from segments of known distance (the ``model_segments_`` of
     :class:`AdaptiveKalmanCalibration`: the steps the step model is fitted on).
 
     A camera stride adds the part of its length that falls on a segment's steps (its span in fractional steps, two
     steps per stride); a segment whose strides cover at least :data:`MIN_CAMERA_COVERAGE` of its steps counts, its
-    camera metres divided by the coverage. The scale is the MAP estimate of ``known = scale x camera + e`` with the
-    prior ``N(1, prior_std^2)`` of the fusion's stride scale (:func:`pdr.fusion._linear.solve_stride_scales`); ``e``
-    has the segment's distance std (``measured_std_m x n_steps``: the GNSS chord's or the known distance's) and
-    the camera strides' own (their ``length_std_m``, independent), so a short walk with phone-grade GNSS moves the
-    scale little. Returns None when no recording has camera strides; warns when no segment is covered.
+    camera metres divided by the coverage. The scale is :func:`pdr.slip.calibrated_length_scale` of those (each
+    segment's distance std ``measured_std_m x n_steps``: the GNSS chord's or the known distance's; the recordings
+    are the walks). Returns None when no recording has camera strides; warns when no segment is covered.
     """
-    known, camera, std, n_strides = [], [], [], 0
+    known, camera, known_std, walk, n_strides = [], [], [], [], 0
     have_strides = False
     for r, (strides, steps) in enumerate(zip(strides_list, steps_list)):
         if strides is None or len(steps) < 2:
@@ -77,7 +73,7 @@ def leg_camera_scale(strides_list: list[pd.DataFrame | None], steps_list: list[p
         t_step = steps["t_s"].to_numpy(float)
         lo = _step_index(strides["t_start_s"].to_numpy(float), t_step)
         hi = _step_index(strides["t_end_s"].to_numpy(float), t_step)
-        length, length_std = strides["length_m"].to_numpy(float), strides["length_std_m"].to_numpy(float)
+        length = strides["length_m"].to_numpy(float)
         for seg in segments[(segments["rec_index"] == r) & segments["used"]].itertuples(index=False):
             if np.isfinite(seg.t_start_s) and seg.n_steps != len(t_step):
                 a, b = _step_index(np.array([seg.t_start_s, seg.t_end_s]), t_step)
@@ -87,10 +83,10 @@ def leg_camera_scale(strides_list: list[pd.DataFrame | None], steps_list: list[p
             coverage = float(overlap.sum() / (b - a))
             if coverage < MIN_CAMERA_COVERAGE:
                 continue
-            share = overlap / np.maximum(hi - lo, 1e-9)
             known.append(float(seg.distance_m))
-            camera.append(float(np.sum(length * share)) / coverage)
-            std.append(float(np.hypot(seg.measured_std_m * seg.n_steps, np.sqrt(np.sum((length_std * share) ** 2)) / coverage)))
+            camera.append(float(np.sum(length * overlap / np.maximum(hi - lo, 1e-9))) / coverage)
+            known_std.append(float(seg.measured_std_m * seg.n_steps))
+            walk.append(r)
             n_strides += int(np.count_nonzero(overlap > 0))
     if not have_strides:
         return None
@@ -98,16 +94,15 @@ def leg_camera_scale(strides_list: list[pd.DataFrame | None], steps_list: list[p
         warn(f"calibrate: no segment of known distance is {MIN_CAMERA_COVERAGE:.0%} covered by leg-camera strides; "
              f"the camera's length scale is not calibrated")
         return None
-    scale, scale_std = solve_stride_scales(np.array(known), np.array(camera), np.array(std), np.zeros(len(known), int),
-                                           np.array([prior_std]), np.ones(1), np.inf)
-    scale, scale_std = float(scale[0]), float(scale_std[0])
+    ratio = sum(known) / sum(camera)
     lo_ok, hi_ok = LEG_CAMERA_SCALE_RANGE
-    if not lo_ok <= scale <= hi_ok:
-        warn(f"calibrate: the leg camera's strides read {1.0 / scale:.2f} x the known distance (scale {scale:.3f}, "
-             f"outside [{lo_ok:.3g}, {hi_ok:.3g}]): check camera.toml and [subject]; the scale is not stored")
+    if not lo_ok <= ratio <= hi_ok:
+        warn(f"calibrate: the leg camera's strides read {1.0 / ratio:.2f} x the known distance (outside "
+             f"[{1 / hi_ok:.3g}, {1 / lo_ok:.3g}]): check camera.toml and [subject]; the camera's scale is not stored")
         return None
-    return {"length_scale": scale, "length_scale_std": scale_std, "prior_std": prior_std, "n_segments": len(known),
-            "n_strides": n_strides, "distance_m": round(sum(known), 2)}
+    scale, scale_std = calibrated_length_scale(known, camera, known_std, walk)
+    return {"length_scale": scale, "length_scale_std": scale_std, "measured_ratio": ratio, "n_walks": len(set(walk)),
+            "n_segments": len(known), "n_strides": n_strides, "distance_m": round(sum(known), 2)}
 
 
 def _why_no_segment(steps_list, gnss_list, akf) -> str:
@@ -199,10 +194,7 @@ def calibrate_recordings(recs: list[Path], out: Path, config_path=None, *, dista
         found = ", ".join(f"{n} {why}" for why, n in reasons.items()) or _why_no_segment(steps_list, gnss_list, akf)
         raise InputError(f"calibrate: expected segments of walking of known length (GNSS fixes, distances), found none "
                          f"usable in {len(recordings)} recording(s): {found}")
-    fusion = make_fusion(config.get("fusion"))[1]
-    if not isinstance(fusion, FactorGraphFusion):  # the EKF uses no strides: the graph's default prior
-        fusion = FactorGraphFusion()
-    camera = leg_camera_scale(strides_list, steps_list, segs, fusion.stride_scale_prior_std_of(CAMERA_SOURCE))
+    camera = leg_camera_scale(strides_list, steps_list, segs)
     save_model(akf.model_, out, camera, n_steps=int(round(akf.n_steps_)), distance_m=round(akf.distance_m_, 2), n_segments=int(segs["used"].sum()),
                n_segments_rejected=int((~segs["used"]).sum()), updated=akf.updated_,
                recordings=[rec.id for rec in recordings], sources=[kind for kind, _ in sources], prior=choice,
@@ -210,7 +202,8 @@ def calibrate_recordings(recs: list[Path], out: Path, config_path=None, *, dista
     params = ", ".join(f"{n}={getattr(akf.model_, n):.4g}" for n in akf.model_.theta_names)
     what = "all parameters" if akf.updated_ == "all" else "mainly the level (one walking frequency)"
     kinds = ", ".join(sorted({kind for kind, _ in sources}))
-    camera_line = ("" if camera is None else f"; leg camera: {camera['n_strides']} strides over {camera['distance_m']:.1f} m,"
-                   f" length_scale={camera['length_scale']:.4g}")
+    camera_line = ("" if camera is None else f"; leg camera: {camera['n_strides']} strides over {camera['distance_m']:.1f} m"
+                   f" read x{camera['measured_ratio']:.4g}, length_scale={camera['length_scale']:.4g}"
+                   f" +- {camera['length_scale_std']:.2g}")
     return (f"calibrated {akf.model_.name} model on {len(recordings)} recording(s) ({kinds}): {akf.n_steps_:.0f} steps, "
             f"{akf.distance_m_:.1f} m of walking in {int(segs['used'].sum())} segments, {what}: {params}{camera_line} -> {out}")
