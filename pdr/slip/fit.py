@@ -127,7 +127,8 @@ class SlipOpticalFlowStride(Algorithm):
         (dimensionless: the lift over the leg length grows with the square of the stride over the leg length).
         0.055 is the best of 0.05, 0.055, 0.06, 0.065 and 0.07 on the tuning people of
         ``benchmarks/bench_leg_camera.py`` with the heel brought down to the floor by the end of mid swing
-        (stride MAE 5.2, 4.8, 5.0, 5.2 and 5.9%; the bump now acts in the first two thirds of the swing only;
+        (stride MAE 5.2, 4.7, 4.9, 5.2 and 5.9%, the last two before the knee's least flexion faded at heel strike;
+        the bump now acts in the first two thirds of the swing only;
         with the former heel height, which kept the bump to heel strike, 0.0175 was best, 5.8%); the scale is that
         sensitive to it. The flow's own cost does not pin the
         clearance (fitting it per window picks near-zero lifts on long strides), so it is not fitted. A
