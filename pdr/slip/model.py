@@ -315,8 +315,8 @@ def stride_kinematics(step: SlipStep, body: SlipBody, camera_from_knee_m: float,
             # out of reach (the heel on the floor with the hip far ahead): the foot hangs short toward it, the knee
             # flexed by SWING_MIN_KNEE_RAD instead of snapping straight; through terminal swing that least flexion
             # fades smoothly to the SLIP's straight leg at heel strike
-            u = np.clip((tau - SWING_DESCENT_FRACTION) / (1.0 - SWING_DESCENT_FRACTION), 0.0, 1.0)
-            least_knee = SWING_MIN_KNEE_RAD * (1.0 - u * u * (3.0 - 2.0 * u))
+            fade = np.clip((tau - SWING_DESCENT_FRACTION) / (1.0 - SWING_DESCENT_FRACTION), 0.0, 1.0)
+            least_knee = SWING_MIN_KNEE_RAD * (1.0 - fade * fade * (3.0 - 2.0 * fade))
             reach = np.sqrt(lth ** 2 + lsh ** 2 + 2.0 * lth * lsh * np.cos(least_knee))
             d = np.column_stack([hx, hz]) - hip[m2]
             span = np.hypot(d[:, 0], d[:, 1])
