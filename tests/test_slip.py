@@ -11,6 +11,7 @@ from pdr.constants import GRAVITY_MPS2
 from pdr.errors import InputError, collect_warnings
 from pdr.slip import SlipBody, simulate_flow, simulate_step, stride_kinematics
 from pdr.slip.fit import SlipOpticalFlowStride, segment_strides
+from pdr.slip.model import SWING_DESCENT_FRACTION, SWING_MIN_KNEE_RAD
 from conftest import warns
 
 BODY = SlipBody()
@@ -48,15 +49,42 @@ def test_kinematics_lengths_contact_and_flow():
     assert kin.length_m == pytest.approx(2 * step.length_m)
 
 
+def test_heel_swing_is_down_by_the_end_of_mid_swing_with_a_bent_knee():
+    # Perry & Burnfield / Winter: the foot comes down to the floor by the end of mid swing and skims it to heel
+    # contact; the clearance lifts the heel before that only; the knee extends to about 5 deg, straight only at contact
+    step = simulate_step(1.3, -0.2, math.radians(15), 12000.0, BODY)
+    kins = [stride_kinematics(step, BODY, 0.3, stance_fraction=0.6, swing_profile="heel", swing_clearance_m=c)
+            for c in (0.0, 0.08)]
+    low, high = kins
+    sw = low.phase == 2
+    i0 = int(np.flatnonzero(sw)[0]) - 1
+    tau = (low.t_s - low.t_s[i0]) / (low.duration_s - low.t_s[i0])
+    late, early = sw & (tau >= SWING_DESCENT_FRACTION), sw & (tau < SWING_DESCENT_FRACTION)
+    np.testing.assert_allclose(high.heel_m[late], low.heel_m[late], atol=1e-12)
+    assert np.max(high.heel_m[early, 1] - low.heel_m[early, 1]) > 0.05
+    assert np.max(low.heel_m[late, 1]) < 0.05 < np.max(low.heel_m[sw, 1])
+    # without a clearance bump the heel leaves the toe rocker at its vertical velocity (no kink at toe off)
+    vy = np.diff(low.heel_m[:, 1]) / np.diff(low.t_s)
+    assert vy[i0] == pytest.approx(vy[i0 - 1], rel=0.1)
+    for kin in kins:
+        thigh, shank = kin.knee_m - kin.hip_m, kin.heel_m - kin.knee_m
+        flex = np.arccos(np.clip(np.sum(thigh * shank, axis=1) / (BODY.thigh_length_m * BODY.shank_length_m), -1, 1))
+        assert np.min(flex[early]) >= SWING_MIN_KNEE_RAD - 1e-9
+        # over terminal swing the least flexion fades to the SLIP's straight leg at heel strike, on the floor
+        assert np.min(flex[late]) >= 0 and flex[-1] < 1e-6
+        np.testing.assert_allclose(kin.heel_m[-1], [step.heel_x_m + 2 * step.length_m, 0.0], atol=1e-9)
+
+
 def test_frame_displacement_flow_is_the_instantaneous_flow_at_short_intervals_and_less_at_oblique_view():
     step = simulate_step(1.3, -0.2, math.radians(15), 12000.0, BODY)
     kin = stride_kinematics(step, BODY, 0.3, stance_fraction=0.6, swing_profile="heel", swing_clearance_m=0.05)
     inst = simulate_flow(kin, 120.0)
     np.testing.assert_allclose(simulate_flow(kin, 120.0, 1e-4), inst, atol=0.01 * np.abs(inst).max())
     # over a frame of 1/60 s the floor point seen at the centre crosses the perspective of the tilted view:
-    # the stride's image displacement reads a few percent less than the instantaneous flow's
+    # the stride's image displacement reads less than the instantaneous flow's (about 1% with the foot down on the
+    # floor in late swing, the shank steep, in this stride; up to 20% per sample on rendered walks)
     ratio = np.trapezoid(simulate_flow(kin, 120.0, 1 / 60), kin.t_s) / np.trapezoid(inst, kin.t_s)
-    assert 0.9 < ratio < 0.99
+    assert 0.9 < ratio < 0.995
     with pytest.raises(InputError, match="frame_interval_s"):
         simulate_flow(kin, 120.0, -0.01)
     with pytest.raises(InputError, match="frame_interval_s"):
@@ -212,17 +240,21 @@ def test_impossible_mount_and_too_slow_video_give_no_stride():
 
 
 def test_a_runaway_swing_clearance_keeps_the_slip_clearance_with_a_wide_sigma():
-    est = SlipOpticalFlowStride(camera_from_knee_m=0.3, focal_px=140.0, strides_per_fit=1, scale_windows=1)
+    # a camera low over the floor (the most sensitive set-up)
+    est = SlipOpticalFlowStride(camera_from_knee_m=0.45, focal_px=140.0, strides_per_fit=1, scale_windows=1)
     t, f, _, _ = _measured(est, (1.3, -0.2, math.radians(15), 12000.0))
     assert est.estimate(t, f).fits_.clearance_converged.all()
     # a clearance law this steep makes the scale grow faster than the stride: the passes run away
-    steep = {**est.get_params(), "swing_clearance_ratio": 0.15}
-    runaway = SlipOpticalFlowStride(**steep).estimate(t, f)
-    own = SlipOpticalFlowStride(**{**steep, "clearance_iterations": 0}).estimate(t, f)
-    fits = runaway.fits_
-    assert not fits.clearance_converged.any()
-    np.testing.assert_allclose(fits.length_m, own.fits_.length_m, rtol=1e-9)  # the SLIP's own clearance
-    assert np.all(fits.length_std_m > own.fits_.length_std_m) and np.all(fits.length_std_m >= 0.5 * fits.spread_m)
+    steep = {**est.get_params(), "swing_clearance_ratio": 0.25}
+    with collect_warnings():
+        runaway = SlipOpticalFlowStride(**steep).estimate(t, f)
+        own = SlipOpticalFlowStride(**{**steep, "clearance_iterations": 0}).estimate(t, f)
+    fits, ref = runaway.fits_, own.fits_
+    away = ~fits.clearance_converged.to_numpy()
+    assert away.any()
+    np.testing.assert_allclose(fits.length_m[away], ref.length_m[away], rtol=1e-9)  # the SLIP's own clearance
+    assert np.all(fits.length_std_m[away] > ref.length_std_m[away])
+    assert np.all(fits.length_std_m[away] >= 0.5 * fits.spread_m[away])
 
 
 def test_the_clearance_fixed_point_widens_the_sigma_by_its_gain():

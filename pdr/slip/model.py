@@ -22,6 +22,15 @@ HIP_HEIGHT_RATIO = 0.530  # greater trochanter above the floor
 KNEE_HEIGHT_RATIO = 0.285  # knee joint above the floor
 ANKLE_HEIGHT_RATIO = 0.039  # ankle joint above the floor
 FOOT_LENGTH_RATIO = 0.152  # heel to toe
+# Perry & Burnfield (2010, Gait Analysis): stance takes 60% of the gait cycle at free speed, mid swing ends (and
+# terminal swing begins) at 87%; Winter (1992, Phys Ther 72:45-53): the swing foot passes the floor at its minimum toe clearance
+# (1.29 cm) in mid swing and stays within a few centimetres of it until heel contact, which it makes with negligible
+# vertical velocity. The "heel" swing lowers the shank's floor point to the floor by the end of mid swing, at this
+# fraction of the swing, and carries it there to heel strike.
+SWING_DESCENT_FRACTION = (0.87 - 0.60) / (1.0 - 0.60)
+# the swinging knee extends to near full extension, about 5 deg of flexion, by heel contact (Perry & Burnfield 2010);
+# the SLIP's contact leg is straight, so in the model this least flexion fades to none over terminal swing
+SWING_MIN_KNEE_RAD = math.radians(5.0)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -224,8 +233,12 @@ def stride_kinematics(step: SlipStep, body: SlipBody, camera_from_knee_m: float,
     swing_peak_fraction : where in the swing the parabola reaches eta theta_int (thesis Appendix E: 1/4).
     swing_profile : "parabola" (eq. 3.16-3.17, the thesis: thigh angle linear, shank angle a parabola) or
         "heel" (the thesis' proposed refinement of the hip-to-shank kinematics: the heel travels from its
-        toe-off position to the next heel strike, x_H + 2 step, on a minimum-jerk path lifted by a clearance
-        bump peaking at a third of the swing; knee and shank from the hip by inverse kinematics).
+        toe-off position to the next heel strike, x_H + 2 step, on a minimum-jerk path; its height comes from the
+        toe-off height (a quintic that starts at the toe rocker's vertical velocity) down to the floor by the end of mid swing
+        (:data:`SWING_DESCENT_FRACTION` of the swing, Perry & Burnfield 2010; Winter 1992), lifted on the way by a
+        clearance bump peaking at a third of that descent, then skims the floor to heel strike; knee and shank
+        from the hip by inverse kinematics, the knee flexed at least :data:`SWING_MIN_KNEE_RAD` (fading to none at
+        heel strike over terminal swing): out of reach the foot hangs short of the floor).
     swing_clearance_m : peak heel lift of the "heel" swing (a per-user body parameter).
 
     Notes
@@ -290,11 +303,25 @@ def stride_kinematics(step: SlipStep, body: SlipBody, camera_from_knee_m: float,
             x_hs = step.heel_x_m + 2.0 * step.length_m
             mj = tau ** 3 * (10.0 - 15.0 * tau + 6.0 * tau ** 2)  # minimum-jerk progress
             hx = h0[0] + (x_hs - h0[0]) * mj
-            hz = h0[1] * (1.0 - tau) ** 2 + swing_clearance_m * 6.75 * tau * (1.0 - tau) ** 2  # peak at 1/3
-            heel[m2] = np.column_stack([hx, hz])
+            # height: from the toe-off height and vertical velocity (the toe rocker's, over the last samples) down
+            # to the floor by the end of mid swing, arriving with no velocity and acceleration (a quintic in
+            # s = tau / SWING_DESCENT_FRACTION), plus the clearance bump peaking at s = 1/3; then on the floor
+            j = max(i0 - 2, 0)
+            vy0 = (h0[1] - heel[j, 1]) / max(t[i0] - t[j], 1e-9) * SWING_DESCENT_FRACTION * (te - ts)
+            sd = np.clip(tau / SWING_DESCENT_FRACTION, 0.0, 1.0)
+            hz = (h0[1] * (1.0 - 10.0 * sd ** 3 + 15.0 * sd ** 4 - 6.0 * sd ** 5)
+                  + vy0 * (sd - 6.0 * sd ** 3 + 8.0 * sd ** 4 - 3.0 * sd ** 5)
+                  + swing_clearance_m * 6.75 * sd * (1.0 - sd) ** 2)
+            # out of reach (the heel on the floor with the hip far ahead): the foot hangs short toward it, the knee
+            # flexed by SWING_MIN_KNEE_RAD instead of snapping straight; through terminal swing that least flexion
+            # fades smoothly to the SLIP's straight leg at heel strike
+            fade = np.clip((tau - SWING_DESCENT_FRACTION) / (1.0 - SWING_DESCENT_FRACTION), 0.0, 1.0)
+            least_knee = SWING_MIN_KNEE_RAD * (1.0 - fade * fade * (3.0 - 2.0 * fade))
+            reach = np.sqrt(lth ** 2 + lsh ** 2 + 2.0 * lth * lsh * np.cos(least_knee))
+            d = np.column_stack([hx, hz]) - hip[m2]
+            span = np.hypot(d[:, 0], d[:, 1])
+            heel[m2] = hip[m2] + d * (np.minimum(span, reach) / span)[:, None]
             knee[m2] = _two_link_knee(hip[m2], heel[m2], lth, lsh)
-            reach = np.hypot(*(heel[m2] - knee[m2]).T)
-            heel[m2] = knee[m2] + lsh * (heel[m2] - knee[m2]) / reach[:, None]  # out of reach: foot hangs short
         else:
             raise InputError(f"stride_kinematics: expected swing_profile 'parabola' or 'heel', found {swing_profile!r}")
     sh = heel - knee
