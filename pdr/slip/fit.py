@@ -11,7 +11,7 @@ import pandas as pd
 from scipy.optimize import minimize
 
 from pdr.base import Algorithm
-from pdr.errors import InputError, collect_warnings, warn
+from pdr.errors import InputError, warn
 from pdr.schema import STRIDE_COLUMNS
 from pdr.slip.model import SlipBody, simulate_flow, simulate_step, stride_kinematics
 
