@@ -203,7 +203,7 @@ def calibrate_recordings(recs: list[Path], out: Path, config_path=None, *, dista
     what = "all parameters" if akf.updated_ == "all" else "mainly the level (one walking frequency)"
     kinds = ", ".join(sorted({kind for kind, _ in sources}))
     camera_line = ("" if camera is None else f"; leg camera: {camera['n_strides']} strides over {camera['distance_m']:.1f} m"
-                   f" read x{camera['measured_ratio']:.4g}, length_scale={camera['length_scale']:.4g}"
+                   f", known / camera {camera['measured_ratio']:.4g}, length_scale={camera['length_scale']:.4g}"
                    f" +- {camera['length_scale_std']:.2g}")
     return (f"calibrated {akf.model_.name} model on {len(recordings)} recording(s) ({kinds}): {akf.n_steps_:.0f} steps, "
             f"{akf.distance_m_:.1f} m of walking in {int(segs['used'].sum())} segments, {what}: {params}{camera_line} -> {out}")
