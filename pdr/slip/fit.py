@@ -602,7 +602,7 @@ def calibrated_length_scale(known_m, camera_m, known_std_m, walk) -> tuple[float
                          f"at least one, found {len(known_m)}, {len(camera_m)}, {len(known_std_m)}, {len(walk)}")
     if not (np.all(known_m > 0) and np.all(camera_m > 0) and np.all(known_std_m >= 0)):
         raise InputError("calibrated_length_scale: expected positive distances and stds >= 0")
-    walks, index = np.unique(walk, return_inverse=True)
+    _, index = np.unique(walk, return_inverse=True)
     known_w = np.bincount(index, known_m)
     camera_w = np.bincount(index, camera_m)
     std_w = np.sqrt(np.bincount(index, known_std_m ** 2) + (SCALE_WALK_STD * camera_w) ** 2)
