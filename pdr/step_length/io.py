@@ -77,13 +77,18 @@ def model_from_dict(doc: Any, what: str = "model") -> StepLengthModel:
     return model
 
 
+def _model_document(path: str | Path, what: str) -> Any:
+    """The JSON document of a model file (what ``pdr calibrate`` writes)."""
+    return read_json(path, what=what, missing="expected a JSON file from `pdr calibrate`, found nothing there")
+
+
 LEG_CAMERA_SCALE_RANGE = (2.0 / 3.0, 1.5)  # a factor 1.5 either way: beyond any body model's error, a wrong mount
 
 
 def leg_camera_length_scale(path: str | Path) -> float | None:
     """The leg camera's per-user length scale of a model file (its ``leg_camera`` object), None when it has none."""
     what = f"model file {path}"
-    doc = read_json(path, what=what, missing="expected a JSON file from `pdr calibrate`, found nothing there")
+    doc = _model_document(path, what)
     section = doc.get("leg_camera") if isinstance(doc, dict) else None
     if section is None:
         return None
@@ -97,7 +102,7 @@ def leg_camera_length_scale(path: str | Path) -> float | None:
 def load_model(path: str | Path) -> StepLengthModel:
     """Read a model file written by :func:`save_model`."""
     what = f"model file {path}"
-    doc = read_json(path, what=what, missing="expected a JSON file from `pdr calibrate`, found nothing there")
+    doc = _model_document(path, what)
     return model_from_dict(doc, what)
 
 
