@@ -205,6 +205,7 @@ def test_body_from_what_a_user_knows():
     long_legs = SlipBody.from_user(1.80, leg_length_m=1.0)  # a measured leg rescales thigh and knee height alike
     assert long_legs.leg_length_m == pytest.approx(1.0)
     assert long_legs.shank_length_m / long_legs.thigh_length_m == pytest.approx(body.shank_length_m / body.thigh_length_m)
+    assert long_legs.foot_length_m == pytest.approx(body.foot_length_m)  # the toe pivot's lever: Winter's foot
     shank = SlipBody.from_user(1.80, leg_length_m=0.95, shank_length_m=0.42)  # knee to ankle + the ankle height
     assert shank.shank_length_m == pytest.approx(0.42 + 0.039 * 1.80) and shank.leg_length_m == pytest.approx(0.95)
     with pytest.raises(InputError, match="height_m"):

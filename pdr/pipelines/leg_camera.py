@@ -2,7 +2,8 @@
 
 Config sections: ``[flow]`` (CorrelationOpticalFlow parameters; defaults scaled to the frame size) and
 ``[slip_of]`` (SlipOpticalFlowStride parameters; body lengths from the recording's ``[subject]`` by
-:meth:`pdr.slip.model.SlipBody.from_user`: the lengths given, Winter's ratios to the height for the others).
+:meth:`pdr.slip.model.SlipBody.from_user`: the lengths given, Winter's ratios to the height for the others; the
+SLIP's foot, the lever of its toe pivot, Winter's for the height, not ``foot_length_m``).
 """
 
 from __future__ import annotations
@@ -51,7 +52,7 @@ def camera_strides(rec: Recording, config: dict) -> pd.DataFrame | None:
     flow_est = CorrelationOpticalFlow.from_config({**flow_defaults, **config.get("flow", {})}).estimate(frames, t)
     flow = flow_est.flow_
     subject = rec.subject
-    lengths = {k: float(subject[k]) for k in ("leg_length_m", "shank_length_m", "thigh_length_m", "foot_length_m")
+    lengths = {k: float(subject[k]) for k in ("leg_length_m", "shank_length_m", "thigh_length_m")
                if k in subject}
     body = SlipBody.from_user(float(subject.get("height_m", DEFAULT_HEIGHT_M)), **lengths)
     slip_defaults = {
