@@ -6,10 +6,11 @@ without slip, double support, per-step variability; written by another work stre
 
 Stride length is measured on simulated people: a tuning group (on which the estimator's swing-clearance ratio, the
 failure threshold and the sigma floor were chosen) and a test group of other people, each person with a drawn leg
-proportion (Bogin & Varela-Silva 2010) and step-length law (``GaitUser``; healthy and older cohorts), at three speeds,
+proportion (Bogin & Varela-Silva 2010), where the knee sits within the leg (``KNEE_SCALE_SD``) and step-length law (``GaitUser``; healthy and older cohorts), at three speeds,
 on three real floors (gravel, brick, grass), with two camera set-ups. The estimator is given what a user knows: the
 height and the leg length tape-measured (+-1 cm), the camera's mount distance below the knee measured (+-0.5 cm), the camera intrinsics; the
-segment lengths come from Winter's ratios (``SlipBody.from_user``). Each group also reports its strides read from the
+segment lengths come from Winter's ratios (``SlipBody.from_user``); each group is read again with the shank (knee
+to ankle) tape-measured too. Each group also reports its strides read from the
 measured flow with the walks' true camera geometry: the flow's own error, apart from the model's, and its walks after
 a per-user calibration (the scale ``pdr calibrate`` stores, ``pdr.slip.calibrated_length_scale``) on one walk of each
 person, a known distance over that walk's strides: the scale is fitted there once and the person's other walks are
@@ -29,7 +30,7 @@ from pdr.errors import collect_warnings
 from pdr.pipelines.leg_camera import forward_flow
 from pdr.sim.camera import TEXTURES, CameraModel, load_texture, render_leg_camera
 from pdr.sim.gait import WalkKinematics
-from pdr.sim.people import LEG_SCALE_SD, Body, GaitUser, plan_walk
+from pdr.sim.people import KNEE_SCALE_SD, LEG_SCALE_SD, Body, GaitUser, plan_walk
 from pdr.sim.simulator import MEASURE_STD_M, MOUNT_STD_M
 from pdr.sim.route import Route
 from pdr.pipelines.calibrate import KNOWN_DISTANCE_REL_STD
@@ -143,11 +144,13 @@ class Table1Body(Body):
 
 def person(height_m: float, seed: int, cohort: str) -> Person:
     rng = np.random.default_rng([seed, 1])
-    body = Body(height_m, float(np.clip(1.0 + LEG_SCALE_SD * rng.standard_normal(), 0.9, 1.1)))
+    leg_scale = float(np.clip(1.0 + LEG_SCALE_SD * rng.standard_normal(), 0.9, 1.1))
     user = GaitUser.draw(rng, cohort=cohort)
-    tape = np.random.default_rng([seed, 2]).standard_normal(3)
+    knee_scale = float(np.clip(1.0 + KNEE_SCALE_SD * np.random.default_rng([seed, 4]).standard_normal(), 0.92, 1.08))
+    body = Body(height_m, leg_scale, knee_scale)
+    tape = np.random.default_rng([seed, 2]).standard_normal(4)
     known = dict(height_m=height_m + MEASURE_STD_M * tape[0], leg_length_m=body.leg_length_m + MEASURE_STD_M * tape[1],
-                 mount_error_m=MOUNT_STD_M * tape[2])
+                 mount_error_m=MOUNT_STD_M * tape[2], shank_length_m=body.shank_m + MEASURE_STD_M * tape[3])
     return Person(body, user, known, seed)
 
 
@@ -168,9 +171,11 @@ def _render(kin, cam, texture, duration_s, seed):
     return flow, render_s, len(frames) / (time.perf_counter() - t0)
 
 
-def estimator_for(p: Person, cam: CameraModel, **params) -> SlipOpticalFlowStride:
-    """The estimator as a user sets it up: body from the height and the measured leg length, the mount measured."""
-    body = SlipBody.from_user(p.known["height_m"], leg_length_m=p.known["leg_length_m"])
+def estimator_for(p: Person, cam: CameraModel, *, shank_measured: bool = False, **params) -> SlipOpticalFlowStride:
+    """The estimator as a user sets it up: body from the height and the measured leg length (and, if
+    ``shank_measured``, the shank, knee to ankle), the mount measured."""
+    shank = {"shank_length_m": p.known["shank_length_m"]} if shank_measured else {}
+    body = SlipBody.from_user(p.known["height_m"], leg_length_m=p.known["leg_length_m"], **shank)
     return SlipOpticalFlowStride(thigh_length_m=body.thigh_length_m, shank_length_m=body.shank_length_m,
                                  foot_length_m=body.foot_length_m, focal_px=cam.focal_px, foot=cam.side,
                                  camera_from_knee_m=cam.distance_from_knee_m + p.known["mount_error_m"], **params)
@@ -391,7 +396,8 @@ def _foot_rows(duration_s: float) -> list[dict]:
     for spec in TUNING_PEOPLE:
         p0 = person(*spec)
         for factor in FOOT_FACTORS:
-            p = Person(FootScaledBody(p0.body.height_m, p0.body.leg_scale, factor), p0.user, p0.known, p0.seed)
+            p = Person(FootScaledBody(p0.body.height_m, p0.body.leg_scale, p0.body.knee_scale, foot_factor=factor),
+                       p0.user, p0.known, p0.seed)
             kin = _walk_of(p, 1.2, duration_s)
             flow, _, _ = _render(kin, CAM, "gravel", duration_s, seed=3)
             for key, extra in zip(errors, ({}, {"foot_length_m": p.body.foot_m})):
@@ -409,6 +415,8 @@ def _foot_rows(duration_s: float) -> list[dict]:
     return rows
 
 
+# the rows of the groups read with the shank measured too
+SHANK_ROWS = ("stride length MAE", "strides found (of the true strides in the video)", "errors within 2 sigma")
 THESIS_MODEL = dict(swing_profile="parabola", integral_weight=0.0, duration_weight=50.0, length_from="model")
 
 
@@ -420,7 +428,7 @@ def run(quick: bool = False) -> list[dict]:
     speeds = SPEEDS_MPS[::2] if quick else SPEEDS_MPS
     fit_times, render_ms, flow_fps = [], [], []
     for name, data, people in (("tuning group", "in-sample", tuning), ("test group", "left out", test)):
-        results = []
+        results, shank_results = [], []
         for spec, v, cam_name, tex in walk_cases(people, speeds, quick):
             p = person(*spec)
             cam = CAMERAS[cam_name]
@@ -435,7 +443,11 @@ def run(quick: bool = False) -> list[dict]:
                                 true_geometry=_true_geometry_errors(kin, cam, flow, t_range),
                                 true_displacement=_true_displacement_errors(kin, cam, flow, t_range),
                                 flow=flow, kin=kin, t_range=t_range))
+            est = _fit(estimator_for(p, cam, shank_measured=True), flow)
+            shank_results.append(dict(spec=spec, speed=v, camera=cam_name, texture=tex, **_score(est, kin, cam, t_range)))
         rows += _group_rows(name, data, results)
+        rows += [r for r in _group_rows(f"{name}, shank measured too (knee to ankle, +-1 cm)", data, shank_results)
+                 if r["metric"] in SHANK_ROWS or r["metric"].startswith(("worst walk", "stride length bias"))]
         rows += _group_rows(f"{name}, calibrated on one walk (each person's walk nearest {CALIBRATION_SPEED_MPS} m/s, "
                             "whatever its camera and floor; not scored)", data, _calibrated(results),
                             splits=("calibration", "texture"))

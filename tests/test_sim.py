@@ -83,6 +83,16 @@ def test_recording_validates_and_reference_is_consistent(tmp_path):
 # Body kinematics
 # ---------------------------------------------------------------------------------------------------------------
 
+def test_body_proportions_keep_the_leg_length():
+    from pdr.sim.people import Body
+    winter, low_knee = Body(1.75), Body(1.75, leg_scale=1.02, knee_scale=0.95)
+    assert low_knee.leg_length_m == pytest.approx(Body(1.75, leg_scale=1.02).leg_length_m)  # the knee moves in the leg
+    assert low_knee.shank_m == pytest.approx(0.95 * 1.02 * winter.shank_m)
+    assert low_knee.thigh_m > 1.02 * winter.thigh_m
+    with pytest.raises(InputError, match="knee_scale"):
+        Body(1.75, knee_scale=1.3)
+
+
 def test_kinematics_interface_and_rigid_segments(steady_walk):
     kin = steady_walk
     t = np.linspace(0.0, kin.duration_s, 700)
