@@ -6,8 +6,9 @@ without slip, double support, per-step variability; written by another work stre
 
 Stride length is measured on simulated people: a tuning group (on which the estimator's swing-clearance ratio, the
 failure threshold and the sigma floor were chosen) and a test group of other people, each person with a drawn leg
-proportion (Bogin & Varela-Silva 2010), where the knee sits within the leg (``KNEE_SCALE_SD``) and step-length law (``GaitUser``; healthy and older cohorts), at three speeds,
-on three real floors (gravel, brick, grass), with two camera set-ups. The estimator is given what a user knows: the
+proportion (Bogin & Varela-Silva 2010), knee height within the leg (``KNEE_SCALE_SD``) and step-length law
+(``GaitUser``; healthy and older cohorts), at three speeds, on three real floors (gravel, brick, grass), with two
+camera set-ups. The estimator is given what a user knows: the
 height and the leg length tape-measured (+-1 cm), the camera's mount distance below the knee measured (+-0.5 cm), the camera intrinsics; the
 segment lengths come from Winter's ratios (``SlipBody.from_user``); each group is read again with the shank (knee
 to ankle) tape-measured too. Each group also reports its strides read from the

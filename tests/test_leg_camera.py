@@ -74,7 +74,7 @@ def test_camera_strides_on_a_rendered_walk(tmp_path):
     np.testing.assert_allclose(strides.t_start_s, true.t_start_s.to_numpy()[k], atol=0.06)  # heel strikes from the flow
     assert np.mean(np.abs(strides.length_m.to_numpy() / true.length_m.to_numpy()[k] - 1)) < 0.15
     assert np.all(strides.length_std_m > 0)
-    # the SLIP's toe lever follows the leg: a measured foot, here far from Winter's, does not move the strides
+    # the SLIP's toe lever is Winter's foot for the height: a measured foot, here far from it, moves no stride
     footed = {**rec.meta, "subject": {**rec.meta["subject"], "foot_length_m": 0.2}}
     again = camera_strides(Recording(meta=footed, imu=rec.imu, camera=rec.camera, video_path=rec.video_path,
                                      frames=rec.frames), {})

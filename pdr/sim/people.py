@@ -50,7 +50,8 @@ class Body:
         if not 0.85 <= self.knee_scale <= 1.15:
             raise InputError(f"subject knee_scale: expected 0.85-1.15, found {self.knee_scale}")
 
-    thigh_m = property(lambda self: (THIGH_RATIO + (1.0 - self.knee_scale) * SHANK_RATIO) * self.leg_scale * self.height_m)
+    thigh_m = property(lambda self: (THIGH_RATIO + (1.0 - self.knee_scale) * SHANK_RATIO) * self.leg_scale
+                       * self.height_m)
     shank_m = property(lambda self: SHANK_RATIO * self.knee_scale * self.leg_scale * self.height_m)
     foot_m = property(lambda self: FOOT_RATIO * self.height_m)
     ankle_height_m = property(lambda self: ANKLE_HEIGHT_RATIO * self.height_m)

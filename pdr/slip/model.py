@@ -25,7 +25,8 @@ FOOT_LENGTH_RATIO = 0.152  # heel to toe
 # The SLIP's foot is the lever of its toe pivot, a stand-in for the roll-over of ankle and foot: Winter's foot for the
 # height, never a measured one. On rendered walks whose feet are 0.8 or 1.25 times Winter's the flow hardly changes,
 # but the toe pivot moves the stride about 1.2% per cm of lever: set to the true foot, the stride bias of the tuning
-# people's walks (benchmarks/bench_leg_camera.py, 1.2 m/s) swings from -19 to +14%, against -11 to +5% with this lever.
+# people's walks (benchmarks/bench_leg_camera.py, 1.2 m/s, every knee Winter's) swings from -19 to +14%, against -11
+# to +5% with this lever.
 # Perry & Burnfield (2010, Gait Analysis): stance takes 60% of the gait cycle at free speed, mid swing ends (and
 # terminal swing begins) at 87%; Winter (1992, Phys Ther 72:45-53): the swing foot passes the floor at its minimum toe clearance
 # (1.29 cm) in mid swing and stays within a few centimetres of it until heel contact, which it makes with negligible
@@ -66,7 +67,7 @@ class SlipBody:
         trochanter), the shank (knee to ankle joint) and the thigh.
 
         Missing lengths come from Winter's ratios to height (:data:`HIP_HEIGHT_RATIO`, ...); a measured leg length
-        rescales the Winter knee height (people differ most in leg proportion, not in the split of the leg). The
+        rescales the Winter knee height (where the knee sits within the leg varies too: give the shank). The
         SLIP's shank runs from the knee to the ground: the knee-to-ankle shank plus the Winter ankle height. The
         foot is the toe pivot's lever, Winter's for the height, not a measured foot. The
         mass stays the default: the SLIP's motion depends on stiffness / mass only, and the stiffness is fitted.
