@@ -5,7 +5,7 @@ without slip, double support, per-step variability; written by another work stre
 ``pdr.sim.camera`` - a richer model than the SLIP the estimator fits.
 
 Stride length is measured on simulated people: a tuning group (on which the estimator's swing-clearance ratio, the
-failure threshold and the sigma floor were chosen) and a test group of other people, each person with a drawn leg
+flow's pre-blur, the failure threshold and the sigma floor were chosen) and a test group of other people, each person with a drawn leg
 proportion (Bogin & Varela-Silva 2010), knee height within the leg (``KNEE_SCALE_SD``) and step-length law
 (``GaitUser``; healthy and older cohorts), at three speeds, on three real floors (gravel, brick, grass), with two
 camera set-ups. The estimator is given what a user knows: the
@@ -28,7 +28,7 @@ import numpy as np
 
 from pdr.flow import CorrelationOpticalFlow, InterpolationOpticalFlow, PhaseCorrelationOpticalFlow
 from pdr.errors import collect_warnings
-from pdr.pipelines.leg_camera import forward_flow
+from pdr.pipelines.leg_camera import flow_defaults, forward_flow
 from pdr.sim.camera import TEXTURES, CameraModel, load_texture, render_leg_camera
 from pdr.sim.gait import WalkKinematics
 from pdr.sim.people import KNEE_SCALE_SD, LEG_SCALE_SD, Body, GaitUser, plan_walk
@@ -166,9 +166,7 @@ def _render(kin, cam, texture, duration_s, seed):
     frames, table = render_leg_camera(kin, cam, 0.5, duration_s + 1.5, load_texture(texture), seed=seed)
     render_s = (time.perf_counter() - t0) / len(frames)
     t0 = time.perf_counter()
-    patch = max(12, min(frames.shape[1:]) // 5)  # the pipeline's defaults
-    flow = CorrelationOpticalFlow(patch_px=patch, grid_step_px=patch, max_shift_px=max(4, patch // 2 - 2),
-                                  predict=True).estimate(frames, table.t_s).flow_
+    flow = CorrelationOpticalFlow(**flow_defaults(*frames.shape[1:])).estimate(frames, table.t_s).flow_
     return flow, render_s, len(frames) / (time.perf_counter() - t0)
 
 
