@@ -579,10 +579,10 @@ class SlipOpticalFlowStride(Algorithm):
 # Per-user length scale of the SLIP-OF strides: the spread of a walk's mean stride error between people and, within
 # one person, from walk to walk (floor, camera set-up, pace). Both read on the tuning group of
 # ``python -m benchmarks leg_camera`` (its rows "SD between them" and "SD within a person": 4 people x 3 walks,
-# 3.65% and 4.6% with each person's knee drawn within the leg; 2.0% and 4.2% before), before the calibrated test rows
-# were run.
-SCALE_PERSON_STD = 0.037
-SCALE_WALK_STD = 0.046
+# 3.5% and 3.1% with each person's knee drawn within the leg and the flow pre-blurred by a twelfth of a patch; 3.65%
+# and 4.6% with the thesis' 1 px blur; 2.0% and 4.2% with every knee Winter's), before the calibrated test rows were run.
+SCALE_PERSON_STD = 0.035
+SCALE_WALK_STD = 0.031
 
 
 def calibrated_length_scale(known_m, camera_m, known_std_m, walk) -> tuple[float, float]:
@@ -591,8 +591,8 @@ def calibrated_length_scale(known_m, camera_m, known_std_m, walk) -> tuple[float
     ``known_m`` (std ``known_std_m``) and ``camera_m`` (the SLIP-OF strides' metres over the same stretches, the
     estimator's scale 1) per stretch, ``walk`` the walk (recording) of each. A hierarchical model: the person's scale
     ``s ~ N(1, SCALE_PERSON_STD^2)``, each walk's camera off it by its own factor, ``N(1, SCALE_WALK_STD^2)``
-    (its floor, camera, pace), shared by the walk's stretches; so one walk moves the scale by two fifths of what it
-    reads (3.7^2 / (3.7^2 + 4.6^2)), and only walks of several floors and paces pin a person's own scale down. The std is
+    (its floor, camera, pace), shared by the walk's stretches; so one walk moves the scale by a little over half of
+    what it reads (3.5^2 / (3.5^2 + 3.1^2)), and only walks of several floors and paces pin a person's own scale down. The std is
     the person's scale's; a later walk adds its own ``SCALE_WALK_STD``.
     """
     known_m, camera_m = np.asarray(known_m, float), np.asarray(camera_m, float)
