@@ -153,9 +153,9 @@ class SlipOpticalFlowStride(Algorithm):
     length_scale : per-user factor on the model's stride length (1: none; see :func:`calibrated_length_scale`,
         which `pdr calibrate` runs on a walk of known length).
     model_sigma_fraction : model error floor of the stride sigma, as a fraction of the length, before the
-        swing-clearance fixed point multiplies it by 1 / (1 - gain) (0.05: the per-stride RMS error divided by that
-        factor on the tuning people of ``benchmarks/bench_leg_camera.py``; 97% of their errors within 2 sigma then, 93% with
-        the frame-interval flow model).
+        swing-clearance fixed point multiplies it by 1 / (1 - gain) (0.035: the former 0.05 times the RMS error over
+        the RMS sigma, 0.70, of the tuning people of ``benchmarks/bench_leg_camera.py`` once the flow was pre-blurred by
+        a twelfth of a patch; 94% of their errors within 2 sigma then, RMS error / RMS sigma 0.92).
     min_quality : windows whose mean flow quality is below this give no stride (with a warning).
     multimodal_cost_ratio : refined starts whose cost is within this fraction of the best are other minima of the
         fit; half the spread of their strides joins the sigma.
@@ -206,7 +206,7 @@ class SlipOpticalFlowStride(Algorithm):
                  integral_weight: float = 10.0,
                  strides_per_fit: int = 2,
                  length_from: str = "flow", scale_windows: int = 5, n_refine: int = 2, max_evals: int = 60, duration_weight: float = 0.0, length_scale: float = 1.0,
-                 model_sigma_fraction: float = 0.05, min_quality: float = 0.3, foot: str = "left",
+                 model_sigma_fraction: float = 0.035, min_quality: float = 0.3, foot: str = "left",
                  clearance_from: str = "flow", clearance_iterations: int = 4, multimodal_cost_ratio: float = 0.1,
                  max_residual_fraction: float = 0.5, frame_interval_s: float | None = None):
         self.thigh_length_m = thigh_length_m
