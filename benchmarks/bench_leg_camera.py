@@ -5,14 +5,13 @@ without slip, double support, per-step variability; written by another work stre
 ``pdr.sim.camera`` - a richer model than the SLIP the estimator fits.
 
 Stride length is measured on simulated people: a tuning group (on which the estimator's swing-clearance ratio, the
-flow's pre-blur, the failure threshold and the sigma floor were chosen) and a test group of other people, each person with a drawn leg
-proportion (Bogin & Varela-Silva 2010), knee height within the leg (``KNEE_SCALE_SD``) and step-length law
-(``GaitUser``; healthy and older cohorts), at three speeds, on three real floors (gravel, brick, grass), with two
-camera set-ups. The estimator is given what a user knows: the
-height and the leg length tape-measured (+-1 cm), the camera's mount distance below the knee measured (+-0.5 cm), the camera intrinsics; the
+flow's pre-blur, the failure threshold and the sigma floor were chosen) and a test group of other people, each
+person with a drawn leg proportion (Bogin & Varela-Silva 2010), knee height within the leg (``KNEE_SCALE_SD``) and
+step-length law (``GaitUser``; healthy and older cohorts), at three speeds, on three real floors (gravel, brick,
+grass), with two camera set-ups. The estimator is given what a user knows: the height and the leg length
+tape-measured (+-1 cm), the camera's mount distance below the knee measured (+-0.5 cm), the camera intrinsics; the
 segment lengths come from Winter's ratios (``SlipBody.from_user``); each group is read again with the shank (knee
-to ankle) tape-measured too. Each group also reports its strides read from the
-measured flow with the walks' true camera geometry: the flow's own error, apart from the model's, and its walks after
+to ankle) tape-measured too. Each group also reports its strides read from the measured flow with the walks' true camera geometry: the flow's own error, apart from the model's, and its walks after
 a per-user calibration (the scale ``pdr calibrate`` stores, ``pdr.slip.calibrated_length_scale``) on one walk of each
 person, a known distance over that walk's strides: the scale is fitted there once and the person's other walks are
 scored, never the calibration walk.
@@ -31,7 +30,7 @@ from pdr.errors import collect_warnings
 from pdr.pipelines.leg_camera import flow_defaults, forward_flow
 from pdr.sim.camera import TEXTURES, CameraModel, load_texture, render_leg_camera
 from pdr.sim.gait import WalkKinematics
-from pdr.sim.people import KNEE_SCALE_SD, LEG_SCALE_SD, Body, GaitUser, plan_walk
+from pdr.sim.people import FOOT_RATIO, KNEE_SCALE_SD, LEG_SCALE_SD, Body, GaitUser, plan_walk
 from pdr.sim.simulator import MEASURE_STD_M, MOUNT_STD_M
 from pdr.sim.route import Route
 from pdr.pipelines.calibrate import KNOWN_DISTANCE_REL_STD
@@ -172,12 +171,13 @@ def _render(kin, cam, texture, duration_s, seed):
 
 def estimator_for(p: Person, cam: CameraModel, *, shank_measured: bool = False, **params) -> SlipOpticalFlowStride:
     """The estimator as a user sets it up: body from the height and the measured leg length (and, if
-    ``shank_measured``, the shank, knee to ankle), the mount measured."""
+    ``shank_measured``, the shank, knee to ankle), the mount measured; ``params`` override any of it."""
     shank = {"shank_length_m": p.known["shank_length_m"]} if shank_measured else {}
     body = SlipBody.from_user(p.known["height_m"], leg_length_m=p.known["leg_length_m"], **shank)
-    return SlipOpticalFlowStride(thigh_length_m=body.thigh_length_m, shank_length_m=body.shank_length_m,
-                                 foot_length_m=body.foot_length_m, focal_px=cam.focal_px, foot=cam.side,
-                                 camera_from_knee_m=cam.distance_from_knee_m + p.known["mount_error_m"], **params)
+    return SlipOpticalFlowStride(**{"thigh_length_m": body.thigh_length_m, "shank_length_m": body.shank_length_m,
+                                    "foot_length_m": body.foot_length_m, "focal_px": cam.focal_px, "foot": cam.side,
+                                    "camera_from_knee_m": cam.distance_from_knee_m + p.known["mount_error_m"],
+                                    **params})
 
 
 def _fit(est, flow):
@@ -381,7 +381,7 @@ class FootScaledBody(Body):
     """A body whose foot is ``foot_factor`` times Winter's for its height, all else as :class:`Body`."""
 
     foot_factor: float = 1.0
-    foot_m = property(lambda self: self.foot_factor * Body(self.height_m).foot_m)
+    foot_m = property(lambda self: self.foot_factor * FOOT_RATIO * self.height_m)
 
 
 FOOT_FACTORS = (0.8, 1.25)
@@ -400,8 +400,7 @@ def _foot_rows(duration_s: float) -> list[dict]:
             kin = _walk_of(p, 1.2, duration_s)
             flow, _, _ = _render(kin, CAM, "gravel", duration_s, seed=3)
             for key, extra in zip(errors, ({}, {"foot_length_m": p.body.foot_m})):
-                pairs, _ = _matched(_fit(SlipOpticalFlowStride(**{**estimator_for(p, CAM).get_params(), **extra}), flow),
-                                    kin, CAM.side)
+                pairs, _ = _matched(_fit(estimator_for(p, CAM, **extra), flow), kin, CAM.side)
                 errors[key].append(pairs[:, 0] / pairs[:, 1] - 1)
     case = (f"tuning people with feet {' and '.join(map(str, FOOT_FACTORS))} x Winter's "
             f"({len(TUNING_PEOPLE) * len(FOOT_FACTORS)} walks, 1.2 m/s, 100 fps, gravel)")
@@ -464,8 +463,7 @@ def run(quick: bool = False) -> list[dict]:
     table1 = dict(thigh_length_m=0.5, shank_length_m=0.6, mass_kg=50.0)
     for key, extra in (("our fit", table1), ("thesis model", {**table1, **THESIS_MODEL}),
                        ("our fit, toe lever set to Table 1's 0.2 m foot", {**table1, "foot_length_m": 0.2})):
-        est = SlipOpticalFlowStride(**{**estimator_for(thesis_person, CAM).get_params(), **extra})
-        pairs, _ = _matched(_fit(est, flow), kin, CAM.side)
+        pairs, _ = _matched(_fit(estimator_for(thesis_person, CAM, **extra), flow), kin, CAM.side)
         true = float(pairs[:, 1].mean()) if len(pairs) else float("nan")
         rows.append(_row(f"thesis set-up (Table 1 body, 0.8 m/s), true mean {true:.2f} m", f"stride length MAE, {key}",
                          100 * np.mean(np.abs(pairs[:, 0] / pairs[:, 1] - 1)) if len(pairs) else np.nan, "%", "<= 3",
