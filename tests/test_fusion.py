@@ -113,12 +113,15 @@ def test_step_model_is_calibrated_towards_the_truth(walk, graph_result):
 
 def test_step_scale_keeps_the_given_lengths_and_calibrates_their_level(walk):
     # per-form step lengths that are 8% short for this walker: GNSS calibrates one scale of them, the relative lengths
-    # stay; without GNSS (or with the regression calibrated) the scale stays 1
+    # stay; without GNSS (or with the regression calibrated) the scale stays 1. On this walk the fixes read the steps
+    # 1.3% longer than the truth; the std is the marginal one with GNSS's correlated error (about 1.4%), so the
+    # truth lies within 2 sigma
     steps = walk["steps"].assign(step_length_m=0.92 * walk["true_length_m"])
     fusion = FactorGraphFusion(calibrate_step_model=False, calibrate_step_scale=True)
     fusion.fuse(steps, gnss=walk["gnss"])
     scale = fusion.step_scale_
-    assert scale["calibrated"] and scale["scale"] == pytest.approx(1 / 0.92, abs=0.015) and scale["std"] < 0.01
+    assert scale["calibrated"] and 0.005 < scale["std"] < 0.02
+    assert abs(scale["scale"] - 1 / 0.92) < 2 * scale["std"]
     true_total = walk["true_length_m"].sum()
     assert abs(fusion.step_length_m_.sum() - true_total) / true_total < 0.015
     assert FactorGraphFusion(calibrate_step_model=False, calibrate_step_scale=True).fuse(steps).step_scale_ == {

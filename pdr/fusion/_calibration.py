@@ -13,6 +13,7 @@ from typing import NamedTuple
 
 import gtsam
 import numpy as np
+import scipy.linalg
 import scipy.sparse
 import scipy.sparse.linalg
 
@@ -25,6 +26,8 @@ from pdr.fusion._linear import (
     solve_deviation,
     solve_series,
     solve_step_model,
+    series_prior_information,
+    series_weights,
     solve_stride_scales,
     step_model_params,
     zero_series,
@@ -32,6 +35,10 @@ from pdr.fusion._linear import (
 from pdr.fusion._solve import Measurements, build_graph, named_blocks
 from pdr.schema import wrap_rad
 from pdr.step_length import RegressionStepLength
+
+
+FD_STEP = 1e-3  # finite-difference step of the measurements (m, rad, or relative for the stride scales)
+MAX_JOINT_BIAS_KNOTS = 64  # about an hour at one knot a minute
 
 
 @dataclasses.dataclass(frozen=True)
@@ -52,6 +59,12 @@ class ParamLayout:
         return cls(blocks["theta"], blocks["bias"], blocks["deviation"], blocks["stride_scales"],
                    blocks["step_scale"].start)
 
+    def block(self, name: str) -> slice:
+        """The block of a parameter name (``theta``, ``bias``, ``deviation``, ``stride_scales``, ``step_scale``)."""
+        if name == "step_scale":
+            return slice(self.step_scale, self.step_scale + 1)
+        return getattr(self, name)
+
     def labelled(self) -> dict[str, slice]:
         """The blocks by the names a message gives them."""
         return {"step model": self.theta, "gyro bias": self.bias, "magnetometer deviation": self.deviation,
@@ -66,6 +79,13 @@ class Update(NamedTuple):
     model_cov: np.ndarray | None
     step_scale_std: float
     stride_scale_std: np.ndarray
+
+
+class JointStep(NamedTuple):
+    """The joint Gauss-Newton step: each estimated block's new values and marginal standard deviations, by name."""
+
+    params: dict[str, np.ndarray]
+    std: dict[str, np.ndarray]
 
 
 class AndersonMixing:
@@ -150,6 +170,12 @@ class Calibration:
         if self.own_scale and step_model.covariance_matrix is not None:  # the model's own prior on its one parameter
             self.step_scale_prior_std = float(np.sqrt(step_model.covariance_matrix[0, 0]) / abs(step_model.theta[0]))
         self.step_scale_prior = StepModelParams(np.ones(1), np.array([[self.step_scale_prior_std ** 2]]), 0.0)
+        # the blocks the joint step solves with the poses; a bias of more knots than MAX_JOINT_BIAS_KNOTS (walks of
+        # hours) keeps its closed form: the poses' elimination would hold a dense (3 poses x knots) matrix
+        self.joint_blocks = tuple(name for name, on in (
+            ("theta", self.calibrate), ("step_scale", self.scale_steps),
+            ("bias", self.estimate_bias and nb <= MAX_JOINT_BIAS_KNOTS), ("deviation", bool(self.has_mag.any())),
+            ("stride_scales", self.estimate_scales)) if on)
         self.nonnegative = tuple(RegressionStepLength.theta_names.index(name)
                                  for name in RegressionStepLength.nonnegative)
 
@@ -196,33 +222,33 @@ class Calibration:
             k, k_cov = solve_step_model(along_track(poses)[ok], problem.step_length_m[ok, None],
                                         problem.step_length_std_m[ok], self.step_scale_prior)
             out[lay.step_scale], step_scale_std = float(k[0]), float(np.sqrt(k_cov[0, 0]))
-        if self.estimate_scales:
-            joint = self.joint_step(poses, values, p, use)
-            if joint is None:  # the joint system is singular: the closed form, conditional on the poses
-                k0, k1 = problem.stride_k[:, 0], problem.stride_k[:, 1]
-                distance = np.linalg.norm(poses[k1, :2] - poses[k0, :2], axis=1)
-                out[lay.stride_scales], scale_std = solve_stride_scales(
-                    distance, problem.stride_length_m, problem.stride_std_m, self.src, self.scale_prior_std,
-                    p[lay.stride_scales], fusion.huber_k)
-            else:
-                theta_new, out[lay.stride_scales], scale_std = joint
-                if self.calibrate and all(theta_new[j] >= 0 for j in self.nonnegative):  # else the bounded closed form
-                    out[lay.theta] = theta_new
+        joint = self.joint_step(poses, values, p, use) if self.joint_blocks else None
+        if joint is not None:
+            for name, value in joint.params.items():
+                if name != "theta" or all(value[j] >= 0 for j in self.nonnegative):  # else the bounded closed form
+                    out[lay.block(name)] = value
+            step_scale_std = float(joint.std.get("step_scale", [step_scale_std])[0])
+            scale_std = joint.std.get("stride_scales", scale_std)
+        elif self.estimate_scales:  # the joint system is singular: the closed form, conditional on the poses
+            k0, k1 = problem.stride_k[:, 0], problem.stride_k[:, 1]
+            distance = np.linalg.norm(poses[k1, :2] - poses[k0, :2], axis=1)
+            out[lay.stride_scales], scale_std = solve_stride_scales(
+                distance, problem.stride_length_m, problem.stride_std_m, self.src, self.scale_prior_std,
+                p[lay.stride_scales], fusion.huber_k)
         return Update(out, cov, step_scale_std, scale_std)
 
-    def gnss_scale_info(self, poses: np.ndarray, use: np.ndarray) -> np.ndarray:
-        """Per stride source, the most information (1 / scale variance) GNSS with correlated errors can give its scale:
-        ``D^2 / (2 m sigma^2)`` over the stretch covered by both used fixes and that source's strides."""
-        problem, src = self.problem, self.src
-        n_src = int(src.max()) + 1 if len(src) else 0
-        out = np.zeros(n_src)
+    def gnss_scale_info(self, poses: np.ndarray, use: np.ndarray, spans: list[tuple[int, int]]) -> np.ndarray:
+        """Per span of epochs ``[k0, k1]`` (a stride source's, or the whole walk for the steps' scale), the most
+        information (1 / scale variance) GNSS with correlated errors can give a length scale there: ``D^2 / (2 m
+        sigma^2)`` over the stretch covered by both the used fixes and the span."""
+        problem = self.problem
+        out = np.zeros(len(spans))
         k_fix = problem.gnss_k[use]
         if len(k_fix) < 2:
             return out
         walked = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(poses[:, :2], axis=0), axis=1))])
-        for q in range(n_src):
-            k = problem.stride_k[src == q]
-            lo, hi = max(int(k_fix.min()), int(k[:, 0].min())), min(int(k_fix.max()) + 1, int(k[:, 1].max()))
+        for q, (k0, k1) in enumerate(spans):
+            lo, hi = max(int(k_fix.min()), k0), min(int(k_fix.max()) + 1, k1)
             if hi <= lo:
                 continue
             distance = walked[hi] - walked[lo]
@@ -230,59 +256,99 @@ class Calibration:
             out[q] = distance ** 2 / (2.0 * m * self.fusion.gnss_correlated_std_m ** 2)
         return out
 
-    def joint_step(self, poses: np.ndarray, values: gtsam.Values, p: np.ndarray, use: np.ndarray):
-        """Gauss-Newton step of the stride scales (and the step model, when calibrated) jointly with the poses.
+    def scale_spans(self, name: str) -> list[tuple[int, int]]:
+        """The epochs each length scale of a block covers: a stride source's first to last stride, or every step."""
+        if name == "step_scale":
+            return [(0, self.problem.n_steps)]
+        k = self.problem.stride_k
+        return [(int(k[self.src == q, 0].min()), int(k[self.src == q, 1].max())) for q in range(len(self.sources))]
 
-        Given the poses alone the scales barely move (the strides, not GNSS, set the path length: block coordinate
-        descent would crawl), so the poses are eliminated instead: the graph linearised at ``values`` (gtsam's
-        whitened, robust-weighted rows ``A dx = b``) gets one column per parameter (derivatives of the whitened errors
-        by finite differences of ``b``), and the Schur complement of the poses gives the parameters' reduced
-        system ``S dq = r``. With the priors that is the MAP step and the parameters' marginal covariance. Each
-        scale's information from GNSS is capped at :meth:`gnss_scale_info` (the cap taken as a tighter prior with the
-        same posterior mean). Returns ``(theta, scales, scale_std)`` or None when the system is singular.
+    def joint_step(self, poses: np.ndarray, values: gtsam.Values, p: np.ndarray, use: np.ndarray) -> JointStep | None:
+        """Gauss-Newton step of every estimated parameter block (:attr:`joint_blocks`) jointly with the poses.
+
+        Given the poses alone the parameters crawl (the strides, not GNSS, set the path length; the gyro bias and the
+        magnetometer deviation both turn the path, and each block's solve undoes much of the other's: block
+        coordinate descent takes tens of alternations), so the poses are eliminated instead: the graph linearised at
+        ``values`` (gtsam's whitened, robust-weighted rows ``A dx = b``) gets one column per parameter (the
+        derivatives of the whitened errors, by finite differences of ``b`` in each measurement a block enters: the
+        step lengths, the heading changes, the magnetometer headings, the stride lengths; each row depends on its own
+        measurement only, so one difference serves a whole block), and the Schur complement of the poses gives the
+        parameters' reduced system ``S dq = r``. With the priors that is the MAP step and the parameters' marginal
+        covariance. Each stride scale's information from GNSS is capped at :meth:`gnss_scale_info` (the cap taken as a
+        tighter prior with the same posterior mean). None when the system is singular.
         """
-        problem, lay, calibrate = self.problem, self.layout, self.calibrate
-        src, scale_prior_std = self.src, self.scale_prior_std
-        n_src = len(scale_prior_std)
+        problem, lay = self.problem, self.layout
         meas = self.measurements(p)
         n_pose = 3 * values.size()  # all keys are Pose2, in key order: pose k -> columns 3k..3k+2
 
-        def jacobian(step_len: np.ndarray, stride_len: np.ndarray):
-            graph, rows = build_graph(problem, poses, meas._replace(step_length_m=step_len, stride_length_m=stride_len),
-                                      use, self.absolute, gnss_factor=self.fusion.gnss_factor,
-                                      huber_k=self.fusion.huber_k)
-            m = np.asarray(graph.linearize(values).sparseJacobian_())
-            return (m[0].astype(int) - 1, m[1].astype(int) - 1, m[2]), rows
+        def jacobian(m: Measurements):  # the step factors' noise that of the current lengths: a Gauss-Newton step
+            graph, rows = build_graph(problem, poses, m, use, self.absolute, gnss_factor=self.fusion.gnss_factor,
+                                      huber_k=self.fusion.huber_k, noise_length_m=meas.step_length_m)
+            j = np.asarray(graph.linearize(values).sparseJacobian_())
+            return (j[0].astype(int) - 1, j[1].astype(int) - 1, j[2]), rows
 
-        (rows, cols, vals), blocks = jacobian(meas.step_length_m, meas.stride_length_m)
+        (rows, cols, vals), blocks = jacobian(meas)
         n_rows = int(rows.max()) + 1
         is_b = cols == n_pose
-
-        def b_of(r: np.ndarray, c: np.ndarray, v: np.ndarray) -> np.ndarray:
-            return np.bincount(r[c == n_pose], v[c == n_pose], n_rows)[:n_rows]
-
-        b0 = b_of(rows, cols, vals)
         if n_rows != blocks["gnss"].stop:
             return None  # not the row layout of build_graph
-        step_rows = np.arange(n_rows)[blocks["steps"]]
+
+        def d_rows(**changed) -> np.ndarray:
+            """-d b / d(measurement) per row, each measurement of the named kind moved by ``FD_STEP``."""
+            (r, c, v), _ = jacobian(meas._replace(**{k: getattr(meas, k) + d for k, d in changed.items()}))
+            b = np.bincount(r[c == n_pose], v[c == n_pose], n_rows)[:n_rows]
+            return -(b - b0) / FD_STEP
+
+        b0 = np.bincount(rows[is_b], vals[is_b], n_rows)[:n_rows]
+        step_rows, heading_rows = np.arange(n_rows)[blocks["steps"]], np.arange(n_rows)[blocks["heading"]]
         stride_rows = np.arange(n_rows)[blocks["strides"]]
-        columns = []
-        h = 1e-3
-        if calibrate:  # d(whitened error)/d(step length), then the chain rule through length = features . theta
-            d_len = -(b_of(*jacobian(meas.step_length_m + h * self.feats_ok, meas.stride_length_m)[0]) - b0) / h
-            design = np.where(self.feats_ok[:, None], np.nan_to_num(problem.features), 0.0)
-            for k in range(3):
-                col = np.zeros(n_rows)
-                col[step_rows] = d_len[step_rows] * np.repeat(design[:, k], 3)
-                columns.append(col)
-        d_scale = -(b_of(*jacobian(meas.step_length_m, meas.stride_length_m + h * problem.stride_length_m)[0])
-                    - b0) / h
-        for q in range(n_src):
-            col = np.zeros(n_rows)
-            col[stride_rows[src == q]] = d_scale[stride_rows[src == q]]
-            columns.append(col)
-        a_pp = scipy.sparse.csc_matrix((vals[~is_b], (rows[~is_b], cols[~is_b])), shape=(n_rows, n_pose))
+
+        def on_rows(rows_of: np.ndarray, derivative: np.ndarray, design: np.ndarray, per: int) -> np.ndarray:
+            """(n_rows, k) columns: each measurement's rows (``per`` of them) times its row of ``design``."""
+            out = np.zeros((n_rows, design.shape[1]))
+            out[rows_of] = derivative[rows_of, None] * np.repeat(design, per, axis=0)
+            return out
+
+        names, columns, now, mean, info = [], [], [], [], []
+
+        def add(name, cols_, prior_mean, prior_info):
+            names.append(name)
+            columns.append(cols_)
+            now.append(p[lay.block(name)])
+            mean.append(prior_mean)
+            info.append(prior_info)
+
+        if self.calibrate or self.scale_steps:
+            d_len = d_rows(step_length_m=FD_STEP)
+            if self.calibrate:  # length = features . theta where the features are known
+                design = np.where(self.feats_ok[:, None], np.nan_to_num(problem.features), 0.0)
+                add("theta", on_rows(step_rows, d_len, design, 3), self.model_prior.theta,
+                    np.linalg.inv(self.model_prior.covariance))
+            else:  # length = k x the steps' own lengths
+                add("step_scale", on_rows(step_rows, d_len, problem.step_length_m[:, None], 3), np.ones(1),
+                    np.array([[self.step_scale_prior_std ** -2]]))
+        if "bias" in self.joint_blocks:  # heading change = measured - b(t) dt, b linear between knots
+            j, frac = series_weights(self.bias0, self.t_step)
+            weights = np.zeros((problem.n_steps, len(self.bias0.values)))
+            np.add.at(weights, (np.arange(problem.n_steps), j), 1.0 - frac)
+            np.add.at(weights, (np.arange(problem.n_steps), j + 1), frac)
+            add("bias", on_rows(step_rows, d_rows(dtheta_rad=FD_STEP), -self.dt[:, None] * weights, 3),
+                np.zeros(weights.shape[1]),
+                series_prior_information(self.bias0, self.fusion.gyro_bias_rw_radps_per_sqrt_s,
+                                         self.fusion.gyro_bias_prior_std_radps))
+        if "deviation" in self.joint_blocks:  # magnetometer heading = measured - deviation_design(heading) . c
+            mag_heading = poses[np.flatnonzero(self.has_mag) + 1, 2]
+            unit = np.zeros_like(meas.mag_deviation_coef)
+            unit[0] = FD_STEP  # the constant term: every magnetometer heading moved by the same amount
+            design = deviation_design(mag_heading)
+            add("deviation", on_rows(heading_rows, d_rows(mag_deviation_coef=unit), design, 1), np.zeros(design.shape[1]),
+                np.eye(design.shape[1]) / self.fusion.mag_deviation_prior_std_rad ** 2)
+        if self.estimate_scales:  # stride length = measured x its source's scale
+            d_scale = d_rows(stride_length_m=FD_STEP * problem.stride_length_m)  # d/d(scale) at once
+            add("stride_scales", on_rows(stride_rows, d_scale, np.eye(len(self.scale_prior_std))[self.src], 1),
+                np.ones(len(self.scale_prior_std)), np.diag(1.0 / np.square(self.scale_prior_std)))
         j_q = np.column_stack(columns)
+        a_pp = scipy.sparse.csc_matrix((vals[~is_b], (rows[~is_b], cols[~is_b])), shape=(n_rows, n_pose))
         h_pq = np.asarray(a_pp.T @ j_q)
         try:
             lu = scipy.sparse.linalg.splu(scipy.sparse.csc_matrix(a_pp.T @ a_pp))
@@ -293,25 +359,27 @@ class Calibration:
             return None
         s_red = j_q.T @ j_q - h_pq.T @ x[:, :-1]
         r_red = j_q.T @ b0 - h_pq.T @ x[:, -1]
-        n_th = 3 if calibrate else 0
-        q_now = np.concatenate([p[lay.theta] if calibrate else np.zeros(0), p[lay.stride_scales]])
-        q_prior = np.concatenate([self.model_prior.theta if calibrate else np.zeros(0), np.ones(n_src)])
-        prior = np.zeros((n_th + n_src, n_th + n_src))
-        if calibrate:
-            prior[:3, :3] = np.linalg.inv(self.model_prior.covariance)
-        info_prior = 1.0 / np.square(scale_prior_std)
-        info_cap = self.gnss_scale_info(poses, use)
+        sizes = {name: len(m) for name, m in zip(names, mean)}
+        at = named_blocks(sizes)
+        prior = scipy.linalg.block_diag(*info)
+        q_now, q_prior = np.concatenate(now), np.concatenate(mean)
+        capped_std = {}
         try:
-            prior[n_th:, n_th:] = np.diag(info_prior)
             cov = np.linalg.inv(s_red + prior)
-            info_white = np.maximum(1.0 / np.diag(cov)[n_th:] - info_prior, 0.0)
-            capped = info_white > info_cap
-            # the capped posterior mean = the white-noise one with a prior of info_prior * info_white / info_cap
-            prior[n_th:, n_th:] = np.diag(np.where(capped, info_prior * info_white / np.maximum(info_cap, 1e-12),
+            for name in ("step_scale", "stride_scales"):  # length scales: GNSS's information capped
+                if name in at:
+                    s = at[name]
+                    info_prior = np.diag(prior)[s].copy()
+                    info_white = np.maximum(1.0 / np.diag(cov)[s] - info_prior, 0.0)
+                    info_cap = self.gnss_scale_info(poses, use, self.scale_spans(name))
+                    capped = info_white > info_cap
+                    # the capped posterior mean = the white-noise one with a prior of info_prior * info_white / info_cap
+                    prior[s, s] = np.diag(np.where(capped, info_prior * info_white / np.maximum(info_cap, 1e-12),
                                                    info_prior))
+                    capped_std[name] = 1.0 / np.sqrt(np.minimum(info_white, info_cap) + info_prior)
             step = np.linalg.solve(s_red + prior, r_red - prior @ (q_now - q_prior))
         except np.linalg.LinAlgError:
             return None
         q_new = q_now + step
-        std = 1.0 / np.sqrt(np.minimum(info_white, info_cap) + info_prior)
-        return (q_new[:3] if calibrate else None), q_new[n_th:], std
+        std = {name: np.sqrt(np.diag(cov)[at[name]]) for name in names} | capped_std
+        return JointStep({name: q_new[at[name]] for name in names}, std)

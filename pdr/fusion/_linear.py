@@ -97,13 +97,30 @@ def zero_series(t_s: np.ndarray, knot_s: float) -> SmoothSeries:
     return SmoothSeries(t0_s=float(t_s[0]), knot_s=knot_s, values=np.zeros(n))
 
 
+def series_weights(like: SmoothSeries, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For each time, the index of the knot before it and its fraction of the way to the next one (linear
+    interpolation: ``f(t) = (1 - frac) v[j] + frac v[j + 1]``)."""
+    n = len(like.values)
+    u = (np.asarray(t_s, float) - like.t0_s) / like.knot_s
+    j = np.clip(np.floor(u).astype(int), 0, n - 2)
+    return j, np.clip(u - j, 0.0, 1.0)
+
+
+def series_prior_information(like: SmoothSeries, rw_per_sqrt_s: float, prior_std: float) -> np.ndarray:
+    """The (n, n) information matrix of the knots' prior: a random walk between knots, ``prior_std`` on the first."""
+    n = len(like.values)
+    rw = 1.0 / (rw_per_sqrt_s ** 2 * like.knot_s)
+    diff = np.diff(np.eye(n), axis=0)
+    info = rw * diff.T @ diff
+    info[0, 0] += 1.0 / prior_std ** 2
+    return info
+
+
 def solve_series(like: SmoothSeries, t_s: np.ndarray, y: np.ndarray, scale: np.ndarray, std: np.ndarray,
                  rw_per_sqrt_s: float, prior_std: float) -> SmoothSeries:
     """MAP knot values for ``y_i = scale_i f(t_i) + e_i``; a tridiagonal normal system solved in O(n)."""
     n = len(like.values)
-    u = (t_s - like.t0_s) / like.knot_s
-    j = np.clip(np.floor(u).astype(int), 0, n - 2)
-    frac = np.clip(u - j, 0.0, 1.0)
+    j, frac = series_weights(like, t_s)
     a0, a1 = scale * (1.0 - frac), scale * frac
     w = 1.0 / np.square(std)
     diag = np.zeros(n)

@@ -32,10 +32,13 @@ class Measurements(NamedTuple):
 
 
 def build_graph(problem: Problem, poses: np.ndarray, meas: Measurements, use: np.ndarray, absolute: bool, *,
-                gnss_factor: str, huber_k: float) -> tuple[gtsam.NonlinearFactorGraph, dict[str, slice]]:
+                gnss_factor: str, huber_k: float, noise_length_m: np.ndarray | None = None
+                ) -> tuple[gtsam.NonlinearFactorGraph, dict[str, slice]]:
     """The factor graph at the current ``poses`` (which set the magnetometer deviation at each heading and the shift of
     the ``"shifted"`` GNSS factors) with the fixes ``use``; and the rows of each factor kind in its linearised system
-    (gtsam stacks the factors' whitened rows in the order they are added, each as many rows as its dimension)."""
+    (gtsam stacks the factors' whitened rows in the order they are added, each as many rows as its dimension).
+    ``noise_length_m``: the step lengths that set the step factors' noise (default: ``meas``'s own)."""
+    noise_length = meas.step_length_m if noise_length_m is None else noise_length_m
     graph = gtsam.NonlinearFactorGraph()
     if absolute:
         graph.add(factors.start_prior(gtsam.Pose2(*poses[0]), anchored=False))
@@ -43,7 +46,7 @@ def build_graph(problem: Problem, poses: np.ndarray, meas: Measurements, use: np
         graph.add(factors.start_prior(gtsam.Pose2(0.0, 0.0, problem.heading0_rad), anchored=True))
     for i in range(problem.n_steps):
         graph.add(factors.step_factor(i, meas.step_length_m[i], meas.dtheta_rad[i], problem.step_length_std_m[i],
-                                      problem.dtheta_std_rad[i], problem.lateral_std_m[i]))
+                                      problem.dtheta_std_rad[i], problem.lateral_std_m[i], noise_length[i]))
     mag_idx = np.flatnonzero(np.isfinite(problem.mag_rad))
     mag = problem.mag_rad[mag_idx] - deviation_design(poses[mag_idx + 1, 2]) @ meas.mag_deviation_coef
     for i, m in zip(mag_idx, mag):

@@ -23,16 +23,18 @@ def pose_key(i: int) -> int:
 
 
 def step_factor(i: int, length_m: float, dtheta_rad: float, length_std_m: float, dtheta_std_rad: float,
-                lateral_std_m: float) -> gtsam.BetweenFactorPose2:
+                lateral_std_m: float, noise_length_m: float | None = None) -> gtsam.BetweenFactorPose2:
     """Step ``i`` from epoch ``i`` to ``i + 1``: ``length_m`` along the new heading (the previous heading turned by
     ``dtheta_rad``). Noise: along-track ``length_std_m`` and heading ``dtheta_std_rad`` mapped through the step
-    geometry (full covariance), plus ``lateral_std_m`` across the step."""
+    geometry of a step of ``noise_length_m`` (default ``length_m``; full covariance), plus ``lateral_std_m`` across
+    the step."""
+    lever = length_m if noise_length_m is None else noise_length_m
     # BetweenFactor errors live in the tangent space at the measured relative pose, i.e. in the frame of the pose at
     # the end of the step, whose x axis is the step direction: along = x, across = y (coupled with the heading).
     c, s = np.cos(dtheta_rad), np.sin(dtheta_rad)
     cov = np.array([[length_std_m ** 2, 0.0, 0.0],
-                    [0.0, (length_m * dtheta_std_rad) ** 2 + lateral_std_m ** 2, length_m * dtheta_std_rad ** 2],
-                    [0.0, length_m * dtheta_std_rad ** 2, dtheta_std_rad ** 2]])
+                    [0.0, (lever * dtheta_std_rad) ** 2 + lateral_std_m ** 2, lever * dtheta_std_rad ** 2],
+                    [0.0, lever * dtheta_std_rad ** 2, dtheta_std_rad ** 2]])
     return gtsam.BetweenFactorPose2(pose_key(i), pose_key(i + 1), gtsam.Pose2(length_m * c, length_m * s, dtheta_rad),
                                     gtsam.noiseModel.Gaussian.Covariance(cov))
 

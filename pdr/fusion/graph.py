@@ -218,11 +218,15 @@ class FactorGraphFusion(Algorithm):
     def _stride_sources(self, problem: Problem) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The stride sources (sorted names), each stride's index into them, and each source's scale prior std."""
         sources, index = np.unique(problem.stride_source.astype(str), return_inverse=True)
+        prior = np.array([self.source_scale_prior_std(name) for name in sources])
+        return sources, index.reshape(-1).astype(int), prior
+
+    def source_scale_prior_std(self, source: str) -> float:
+        """The prior std of a stride source's length scale (``stride_scale_prior_std_by_source``, else the common one)."""
         by_source = self.stride_scale_prior_std_by_source
         if by_source is None:
             by_source = DEFAULT_STRIDE_SCALE_PRIOR_STD_BY_SOURCE
-        prior = np.array([float(by_source.get(name, self.stride_scale_prior_std)) for name in sources])
-        return sources, index.reshape(-1).astype(int), prior
+        return float(by_source.get(source, self.stride_scale_prior_std))
 
     def _prepare(self, steps, gnss, strides, t_start_s) -> Problem | None:
         return prepare(steps, gnss, strides, t_start_s=t_start_s,

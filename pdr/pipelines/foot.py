@@ -26,6 +26,7 @@ from pdr.io.recording import Recording
 from pdr.schema import STRIDE_COLUMNS
 from pdr.signals.faults import clipped_samples
 
+FOOT_SOURCE = "foot_imu"  # the strides table's source of the shoe IMUs' strides
 METHODS = {"zupt_ins": ZuptInsStride, "footstep_tracker": FootStepTrackerStride}
 SECTION_KEYS = {"method", "double_feet", "zero_velocity", "zupt_ins", "footstep_tracker", "double_feet_calibration"}
 GYR_SATURATION_MIN_RADPS = 4.0  # 230 deg/s: below this a flat top is a resting sensor, not a clipped one
@@ -158,7 +159,7 @@ def foot_chain(strides: pd.DataFrame | None) -> tuple[pd.DataFrame, pd.DataFrame
     """
     if strides is None or not len(strides) or "heading_change_rad" not in strides.columns:
         return None
-    ins = strides[(strides["source"] == "foot_imu") & strides["dx_m"].notna()] if "dx_m" in strides.columns \
+    ins = strides[(strides["source"] == FOOT_SOURCE) & strides["dx_m"].notna()] if "dx_m" in strides.columns \
         else strides.iloc[:0]
     if not len(ins):
         return None

@@ -31,7 +31,7 @@ from pdr.heading import AttitudeStepHeading
 from pdr.io.recording import Recording
 from pdr.pipelines.bouts import recording_bouts
 from pdr.pipelines.faults import rejected_gnss, sensor_faults, warning_line, warning_objects, widen_steps
-from pdr.pipelines.foot import foot_chain, foot_strides
+from pdr.pipelines.foot import FOOT_SOURCE, foot_chain, foot_strides
 from pdr.pipelines.gait_forms import GAIT_FORMS_KEYS, per_form_step_lengths
 from pdr.pipelines.leg_camera import camera_strides
 from pdr.pipelines.not_walking import drop_not_walking, gnss_only_trajectory, interval_message, not_walking_intervals
@@ -330,18 +330,22 @@ class Pipeline(Algorithm):
 
             # with foot INS strides the graph's chain is the INS path (relative poses between mid-stances), not the steps
             chain = foot_chain(strides)
+            if chain is not None and hasattr(fusion, "calibrate_step_scale"):
+                # the chain is the foot INS path, not the step model's steps: GNSS calibrates one scale of it under the
+                # INS's own prior (its stride source's), and the step model is left as given
+                fusion = type(fusion)(**{**fusion.get_params(), "calibrate_step_model": False, "calibrate_step_scale": True,
+                                         "step_scale_prior_std": fusion.source_scale_prior_std(FOOT_SOURCE)})
             fusion.fuse(steps if chain is None else chain[0],
                         gnss=fusion_gnss(gnss if gnss is None else gnss.assign(masked=gnss["masked"] | gnss_suspect)),
-                        strides=strides if chain is None else chain[1], step_model=model)
+                        strides=strides if chain is None else chain[1], step_model=model if chain is None else None)
             traj = fusion.trajectory_.reset_index(drop=True)
             gnss_used = np.asarray(fusion.gnss_used_, bool) if gnss is not None else None
-            if chain is not None:
-                model = fusion.step_model_ if fusion.step_model_ is not None else model
-            elif len(steps):
+            # with a foot chain the steps keep the step model's lengths (the path is the INS's)
+            if chain is None and len(steps):
                 steps["step_length_m"] = clipped_lengths(np.asarray(fusion.step_length_m_, float), rec.id)
                 steps["heading_rad"] = traj["heading_rad"].to_numpy(float)[1:]  # the fused east-north heading of each step
                 model = fusion.step_model_ if fusion.step_model_ is not None else model
-            else:
+            elif chain is None:
                 usable = None if gnss is None else (np.isfinite(gnss["e_m"]) & np.isfinite(gnss["n_m"]) & ~gnss["masked"]
                                                     & ~gnss_suspect).to_numpy(bool)
                 traj = gnss_only_trajectory(gnss, usable) if gnss is not None else None
