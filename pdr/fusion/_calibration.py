@@ -1,9 +1,10 @@
-"""The calibrated parameters of the batch fusion and their updates given the poses.
+"""The calibrated parameters of the batch fusion and their updates after each pose solve.
 
-Parameters that enter the step measurements linearly (step model ``length = A + B f + C v`` after Ladetto et al. 2000,
-or one scale of the steps' own lengths; heading-rate bias; magnetometer deviation) are solved in closed form given
-the poses; the stride scales take a Gauss-Newton step jointly with the poses (:meth:`Calibration.joint_step`). The
-fixed point ``params = update(solve(params))`` is accelerated by Anderson mixing (Walker & Ni 2011).
+The parameters enter the measurements of the graph's factors (step model ``length = A + B f + C v`` after Ladetto et
+al. 2000, or one scale of the steps' own lengths; heading-rate bias; magnetometer deviation; one scale per stride
+source). After each pose solve they take one Gauss-Newton step jointly with the poses
+(:meth:`Calibration.joint_step`); the closed forms given the poses are the fallback. The fixed point
+``params = update(solve(params))`` is accelerated by Anderson mixing (Walker & Ni 2011).
 """
 
 from __future__ import annotations
@@ -32,13 +33,14 @@ from pdr.fusion._linear import (
     step_model_params,
     zero_series,
 )
-from pdr.fusion._solve import Measurements, build_graph, named_blocks
+from pdr.fusion._solve import Measurements, build_graph, graph_rows, named_blocks
 from pdr.schema import wrap_rad
 from pdr.step_length import RegressionStepLength
 
 
 FD_STEP = 1e-3  # finite-difference step of the measurements (m, rad, or relative for the stride scales)
 MAX_JOINT_BIAS_KNOTS = 64  # about an hour at one knot a minute
+MAX_BAND = 64  # widest band of the poses' normal matrix solved as a band (columns: 3 a pose)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -79,6 +81,25 @@ class Update(NamedTuple):
     model_cov: np.ndarray | None
     step_scale_std: float
     stride_scale_std: np.ndarray
+
+
+def solve_normal(h: scipy.sparse.spmatrix, rhs: np.ndarray) -> np.ndarray | None:
+    """``h^-1 rhs`` for the poses' normal matrix ``h`` (symmetric positive definite); None when it is singular.
+
+    Every factor links poses a few epochs apart (a step, a stride, a GNSS fix between two epochs), so ``h`` is a band
+    matrix in key order: a banded Cholesky factor needs (bandwidth + 1) numbers a pose column, far less than a general
+    sparse LU (a 100,000-step walk: tens of MB instead of hundreds). A wider band (a stride over many epochs) takes the
+    sparse LU."""
+    lower = scipy.sparse.tril(h).tocoo()
+    band = int((lower.row - lower.col).max(initial=0))
+    try:
+        if band <= MAX_BAND:
+            packed = np.zeros((band + 1, h.shape[0]))
+            packed[lower.row - lower.col, lower.col] = lower.data
+            return scipy.linalg.cho_solve_banded((scipy.linalg.cholesky_banded(packed, lower=True), True), rhs)
+        return scipy.sparse.linalg.splu(scipy.sparse.csc_matrix(h)).solve(rhs)
+    except (RuntimeError, np.linalg.LinAlgError):
+        return None
 
 
 class JointStep(NamedTuple):
@@ -192,8 +213,9 @@ class Calibration:
         return Measurements(length, dtheta, p[lay.deviation], problem.stride_length_m * p[lay.stride_scales][self.src])
 
     def update(self, poses: np.ndarray, p: np.ndarray, values: gtsam.Values, use: np.ndarray) -> Update:
-        """The closed-form parameter solve given the poses (each block kept where it is not observable); ``values``
-        and ``use``: the solved graph's poses and fixes, where the stride scales are linearised."""
+        """The parameters after a solve: the joint Gauss-Newton step of the estimated blocks (:meth:`joint_step`,
+        at the solved ``poses`` / ``values`` with the fixes ``use`` the graph had), else (a singular joint system) each block's closed form given the ``poses``; a block that is not
+        observable is kept. The step model's covariance is its closed form's."""
         problem, lay, fusion = self.problem, self.layout, self.fusion
         out, cov = p.copy(), None
         step_scale_std, scale_std = self.step_scale_prior_std, self.scale_prior_std.copy()
@@ -268,46 +290,57 @@ class Calibration:
 
         Given the poses alone the parameters crawl (the strides, not GNSS, set the path length; the gyro bias and the
         magnetometer deviation both turn the path, and each block's solve undoes much of the other's: block
-        coordinate descent takes tens of alternations), so the poses are eliminated instead: the graph linearised at
-        ``values`` (gtsam's whitened, robust-weighted rows ``A dx = b``) gets one column per parameter (the
-        derivatives of the whitened errors, by finite differences of ``b`` in each measurement a block enters: the
-        step lengths, the heading changes, the magnetometer headings, the stride lengths; each row depends on its own
-        measurement only, so one difference serves a whole block), and the Schur complement of the poses gives the
-        parameters' reduced system ``S dq = r``. With the priors that is the MAP step and the parameters' marginal
-        covariance. Each stride scale's information from GNSS is capped at :meth:`gnss_scale_info` (the cap taken as a
+        coordinate descent takes tens of alternations), so the poses are eliminated instead: the graph of the
+        parameters ``p`` built at the solved ``poses`` and linearised at them (``values``: gtsam's whitened,
+        robust-weighted rows ``A dx = b``) gets one column per parameter: the derivatives of the whitened errors, by
+        finite differences of ``b`` in each measurement a block enters (the step lengths, the heading changes, the
+        magnetometer headings, the stride lengths). Each row depends on its own measurement only, so one difference
+        serves a whole block, and blocks on other rows share a graph. The Schur complement of the poses gives the
+        parameters' reduced system ``S dq = r``; with the priors that is the MAP step and the parameters' marginal
+        covariance. Each length scale's information from GNSS is capped at :meth:`gnss_scale_info` (the cap taken as a
         tighter prior with the same posterior mean). None when the system is singular.
         """
         problem, lay = self.problem, self.layout
         meas = self.measurements(p)
         n_pose = 3 * values.size()  # all keys are Pose2, in key order: pose k -> columns 3k..3k+2
 
-        def jacobian(m: Measurements):  # the step factors' noise that of the current lengths: a Gauss-Newton step
-            graph, rows = build_graph(problem, poses, m, use, self.absolute, gnss_factor=self.fusion.gnss_factor,
-                                      huber_k=self.fusion.huber_k, noise_length_m=meas.step_length_m)
-            j = np.asarray(graph.linearize(values).sparseJacobian_())
-            return (j[0].astype(int) - 1, j[1].astype(int) - 1, j[2]), rows
+        blocks = graph_rows(problem, use)
+        n_rows = blocks["gnss"].stop
 
-        (rows, cols, vals), blocks = jacobian(meas)
-        n_rows = int(rows.max()) + 1
-        is_b = cols == n_pose
-        if n_rows != blocks["gnss"].stop:
-            return None  # not the row layout of build_graph
+        def linearized(m: Measurements, with_a: bool) -> tuple[scipy.sparse.csr_matrix | None, np.ndarray] | None:
+            """The whitened system ``A dx = b`` of the graph of the measurements ``m`` at ``values`` (``A`` only if
+            ``with_a``), the step factors' noise held at the current lengths (a Gauss-Newton step); None when its
+            rows are not those of :func:`graph_rows`."""
+            g, _ = build_graph(problem, poses, m, use, self.absolute, gnss_factor=self.fusion.gnss_factor,
+                               huber_k=self.fusion.huber_k, noise_length_m=meas.step_length_m)
+            r, c, v = np.asarray(g.linearize(values).sparseJacobian_())
+            r, c = r.astype(np.int64) - 1, c.astype(np.int64) - 1
+            if r.max(initial=-1) + 1 != n_rows:
+                return None
+            is_b = c == n_pose
+            b = np.bincount(r[is_b], v[is_b], n_rows)
+            keep = ~is_b
+            a = scipy.sparse.csr_matrix((v[keep], (r[keep], c[keep])), shape=(n_rows, n_pose)) if with_a else None
+            return a, b
+
+        base = linearized(meas, True)
+        if base is None:
+            return None
+        a_pp, b0 = base
 
         def d_rows(**changed) -> np.ndarray:
-            """-d b / d(measurement) per row, each measurement of the named kind moved by ``FD_STEP``."""
-            (r, c, v), _ = jacobian(meas._replace(**{k: getattr(meas, k) + d for k, d in changed.items()}))
-            b = np.bincount(r[c == n_pose], v[c == n_pose], n_rows)[:n_rows]
+            """-d b / d(measurement) per row, the measurements of the named kinds moved by the amounts given."""
+            _, b = linearized(meas._replace(**{k: getattr(meas, k) + d for k, d in changed.items()}), False)
             return -(b - b0) / FD_STEP
 
-        b0 = np.bincount(rows[is_b], vals[is_b], n_rows)[:n_rows]
         step_rows, heading_rows = np.arange(n_rows)[blocks["steps"]], np.arange(n_rows)[blocks["heading"]]
         stride_rows = np.arange(n_rows)[blocks["strides"]]
 
-        def on_rows(rows_of: np.ndarray, derivative: np.ndarray, design: np.ndarray, per: int) -> np.ndarray:
-            """(n_rows, k) columns: each measurement's rows (``per`` of them) times its row of ``design``."""
-            out = np.zeros((n_rows, design.shape[1]))
-            out[rows_of] = derivative[rows_of, None] * np.repeat(design, per, axis=0)
-            return out
+        def on_rows(rows_of: np.ndarray, derivative: np.ndarray, design: np.ndarray, per: int) -> scipy.sparse.csc_matrix:
+            """(n_rows, k) sparse columns: each measurement's rows (``per`` of them) times its row of ``design``."""
+            values_ = scipy.sparse.csr_matrix(np.repeat(design, per, axis=0)).multiply(derivative[rows_of, None]).tocoo()
+            return scipy.sparse.csc_matrix((values_.data, (rows_of[values_.row], values_.col)),
+                                           shape=(n_rows, design.shape[1]))
 
         names, columns, now, mean, info = [], [], [], [], []
 
@@ -318,46 +351,45 @@ class Calibration:
             mean.append(prior_mean)
             info.append(prior_info)
 
-        if self.calibrate or self.scale_steps:
-            d_len = d_rows(step_length_m=FD_STEP)
-            if self.calibrate:  # length = features . theta where the features are known
-                design = np.where(self.feats_ok[:, None], np.nan_to_num(problem.features), 0.0)
-                add("theta", on_rows(step_rows, d_len, design, 3), self.model_prior.theta,
-                    np.linalg.inv(self.model_prior.covariance))
-            else:  # length = k x the steps' own lengths
-                add("step_scale", on_rows(step_rows, d_len, problem.step_length_m[:, None], 3), np.ones(1),
-                    np.array([[self.step_scale_prior_std ** -2]]))
-        if "bias" in self.joint_blocks:  # heading change = measured - b(t) dt, b linear between knots
+        # the differences: the step lengths and the heading changes share the step factors' rows, so each needs a
+        # graph of its own; the magnetometer headings and the stride lengths ride along with the first
+        lengths, turns = self.calibrate or self.scale_steps, "bias" in self.joint_blocks
+        others = {}
+        if "deviation" in self.joint_blocks:  # the constant term: every magnetometer heading moved alike
+            others["mag_deviation_coef"] = np.r_[FD_STEP, np.zeros(len(meas.mag_deviation_coef) - 1)]
+        if self.estimate_scales:  # relative: d/d(scale) at once
+            others["stride_length_m"] = FD_STEP * problem.stride_length_m
+        d_len = d_rows(step_length_m=FD_STEP, **others) if lengths else None
+        d_turn = d_rows(dtheta_rad=FD_STEP, **({} if lengths else others)) if turns else None
+        d_other = d_len if lengths else d_turn if turns else d_rows(**others)
+        if self.calibrate:  # length = features . theta where the features are known
+            design = np.where(self.feats_ok[:, None], np.nan_to_num(problem.features), 0.0)
+            add("theta", on_rows(step_rows, d_len, design, 3), self.model_prior.theta,
+                np.linalg.inv(self.model_prior.covariance))
+        if self.scale_steps:  # length = k x the steps' own lengths
+            add("step_scale", on_rows(step_rows, d_len, problem.step_length_m[:, None], 3), np.ones(1),
+                np.array([[self.step_scale_prior_std ** -2]]))
+        if turns:  # heading change = measured - b(t) dt, b linear between knots
             j, frac = series_weights(self.bias0, self.t_step)
             weights = np.zeros((problem.n_steps, len(self.bias0.values)))
             np.add.at(weights, (np.arange(problem.n_steps), j), 1.0 - frac)
             np.add.at(weights, (np.arange(problem.n_steps), j + 1), frac)
-            add("bias", on_rows(step_rows, d_rows(dtheta_rad=FD_STEP), -self.dt[:, None] * weights, 3),
-                np.zeros(weights.shape[1]),
+            add("bias", on_rows(step_rows, d_turn, -self.dt[:, None] * weights, 3), np.zeros(weights.shape[1]),
                 series_prior_information(self.bias0, self.fusion.gyro_bias_rw_radps_per_sqrt_s,
                                          self.fusion.gyro_bias_prior_std_radps))
         if "deviation" in self.joint_blocks:  # magnetometer heading = measured - deviation_design(heading) . c
-            mag_heading = poses[np.flatnonzero(self.has_mag) + 1, 2]
-            unit = np.zeros_like(meas.mag_deviation_coef)
-            unit[0] = FD_STEP  # the constant term: every magnetometer heading moved by the same amount
-            design = deviation_design(mag_heading)
-            add("deviation", on_rows(heading_rows, d_rows(mag_deviation_coef=unit), design, 1), np.zeros(design.shape[1]),
+            design = deviation_design(poses[np.flatnonzero(self.has_mag) + 1, 2])
+            add("deviation", on_rows(heading_rows, d_other, design, 1), np.zeros(design.shape[1]),
                 np.eye(design.shape[1]) / self.fusion.mag_deviation_prior_std_rad ** 2)
         if self.estimate_scales:  # stride length = measured x its source's scale
-            d_scale = d_rows(stride_length_m=FD_STEP * problem.stride_length_m)  # d/d(scale) at once
-            add("stride_scales", on_rows(stride_rows, d_scale, np.eye(len(self.scale_prior_std))[self.src], 1),
+            add("stride_scales", on_rows(stride_rows, d_other, np.eye(len(self.scale_prior_std))[self.src], 1),
                 np.ones(len(self.scale_prior_std)), np.diag(1.0 / np.square(self.scale_prior_std)))
-        j_q = np.column_stack(columns)
-        a_pp = scipy.sparse.csc_matrix((vals[~is_b], (rows[~is_b], cols[~is_b])), shape=(n_rows, n_pose))
-        h_pq = np.asarray(a_pp.T @ j_q)
-        try:
-            lu = scipy.sparse.linalg.splu(scipy.sparse.csc_matrix(a_pp.T @ a_pp))
-            x = lu.solve(np.column_stack([h_pq, a_pp.T @ b0]))
-        except RuntimeError:
+        j_q = scipy.sparse.hstack(columns).tocsc()
+        h_pq = (a_pp.T @ j_q).toarray()
+        x = solve_normal(a_pp.T @ a_pp, np.column_stack([h_pq, a_pp.T @ b0]))
+        if x is None or not np.isfinite(x).all():
             return None
-        if not np.isfinite(x).all():
-            return None
-        s_red = j_q.T @ j_q - h_pq.T @ x[:, :-1]
+        s_red = (j_q.T @ j_q).toarray() - h_pq.T @ x[:, :-1]
         r_red = j_q.T @ b0 - h_pq.T @ x[:, -1]
         sizes = {name: len(m) for name, m in zip(names, mean)}
         at = named_blocks(sizes)

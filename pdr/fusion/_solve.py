@@ -35,9 +35,7 @@ def build_graph(problem: Problem, poses: np.ndarray, meas: Measurements, use: np
                 gnss_factor: str, huber_k: float, noise_length_m: np.ndarray | None = None
                 ) -> tuple[gtsam.NonlinearFactorGraph, dict[str, slice]]:
     """The factor graph at the current ``poses`` (which set the magnetometer deviation at each heading and the shift of
-    the ``"shifted"`` GNSS factors) with the fixes ``use``; and the rows of each factor kind in its linearised system
-    (gtsam stacks the factors' whitened rows in the order they are added, each as many rows as its dimension).
-    ``noise_length_m``: the step lengths that set the step factors' noise (default: ``meas``'s own)."""
+    the ``"shifted"`` GNSS factors) with the fixes ``use``, and its rows (:func:`graph_rows`). ``noise_length_m``: the step lengths that set the step factors' noise (default: ``meas``'s own)."""
     noise_length = meas.step_length_m if noise_length_m is None else noise_length_m
     graph = gtsam.NonlinearFactorGraph()
     if absolute:
@@ -65,10 +63,15 @@ def build_graph(problem: Problem, poses: np.ndarray, meas: Measurements, use: np
         for j, m, s in zip(idx, nearest, shift):
             graph.add(factors.gnss_shifted_factor(m, problem.gnss_en_m[j], s,
                                                   factors.gnss_noise(float(problem.gnss_std_m[j]), huber_k)))
-    # Pose2 prior and between factors: 3 rows; rotation prior, range: 1; GNSS position: 2
-    rows = named_blocks({"start": 3, "steps": 3 * problem.n_steps, "heading": len(mag_idx),
-                         "strides": len(meas.stride_length_m), "gnss": 2 * len(idx)})
-    return graph, rows
+    return graph, graph_rows(problem, use)
+
+
+def graph_rows(problem: Problem, use: np.ndarray) -> dict[str, slice]:
+    """The rows of each factor kind in the linearised system of :func:`build_graph` (gtsam stacks the factors'
+    whitened rows in the order they are added): Pose2 prior and between factors 3 rows each; rotation prior and
+    range 1; GNSS position 2."""
+    return named_blocks({"start": 3, "steps": 3 * problem.n_steps, "heading": int(np.isfinite(problem.mag_rad).sum()),
+                         "strides": len(problem.stride_length_m), "gnss": 2 * int(np.sum(use))})
 
 
 def initial_values(poses: np.ndarray) -> gtsam.Values:
