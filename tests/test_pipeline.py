@@ -121,3 +121,23 @@ def test_the_readme_python_example_runs(walk, tmp_path, monkeypatch):
     with collect_warnings():
         exec(compile(code, "README.md", "exec"), scope)  # noqa: S102
     assert scope["res"].summary_["n_steps"] == len(scope["res"].steps_) > 10
+
+
+def test_a_foot_ins_chain_is_scaled_under_the_ins_prior_and_leaves_the_step_model(tmp_path):
+    # with shoe IMUs the graph's chain is the foot INS path: GNSS calibrates one scale of it under the foot INS's own
+    # prior (2%), not the waist step model's (5%), and the step model reported is the one given, not scaled by it
+    from pdr.sim import simulate_to_disk
+    from pdr.step_length import body_model
+
+    root = Path(__file__).resolve().parents[1]
+    text = (root / "configs" / "sim" / "foot_imus.toml").read_text()
+    config = tmp_path / "walk.toml"
+    config.write_text(text.replace("duration_s = 70.0", "duration_s = 25.0").replace("duration_s = 60.0", "duration_s = 20.0"))
+    rec = simulate_to_disk(config, tmp_path / "walk", seed=1)
+    with collect_warnings():
+        summary = run_recording(rec, tmp_path / "out", force=True)
+    assert summary["n_strides"] > 0 and summary["step_scale"]["calibrated"]
+    assert summary["step_scale"]["prior_std"] == pytest.approx(0.02)
+    recording = pdr.load_recording(rec)
+    given, _ = body_model(recording.subject, recording.placement)
+    assert summary["step_model"]["params"]["k_scale"] == pytest.approx(given.k_scale)
