@@ -26,9 +26,9 @@ from pdr.fusion._linear import (
     deviation_design,
     solve_deviation,
     solve_series,
-    solve_step_model,
     series_prior_information,
     series_weights,
+    solve_step_model,
     solve_stride_scales,
     step_model_params,
     zero_series,
@@ -87,9 +87,8 @@ def solve_normal(h: scipy.sparse.spmatrix, rhs: np.ndarray) -> np.ndarray | None
     """``h^-1 rhs`` for the poses' normal matrix ``h`` (symmetric positive definite); None when it is singular.
 
     Every factor links poses a few epochs apart (a step, a stride, a GNSS fix between two epochs), so ``h`` is a band
-    matrix in key order: a banded Cholesky factor needs (bandwidth + 1) numbers a pose column, far less than a general
-    sparse LU (a 100,000-step walk: tens of MB instead of hundreds). A wider band (a stride over many epochs) takes the
-    sparse LU."""
+    matrix in key order: a banded Cholesky factor needs (bandwidth + 1) numbers a pose column, less memory than a
+    general sparse LU. A wider band (a stride over many epochs) takes the sparse LU."""
     lower = scipy.sparse.tril(h).tocoo()
     band = int((lower.row - lower.col).max(initial=0))
     try:
@@ -213,9 +212,10 @@ class Calibration:
         return Measurements(length, dtheta, p[lay.deviation], problem.stride_length_m * p[lay.stride_scales][self.src])
 
     def update(self, poses: np.ndarray, p: np.ndarray, values: gtsam.Values, use: np.ndarray) -> Update:
-        """The parameters after a solve: the joint Gauss-Newton step of the estimated blocks (:meth:`joint_step`,
-        at the solved ``poses`` / ``values`` with the fixes ``use`` the graph had), else (a singular joint system) each block's closed form given the ``poses``; a block that is not
-        observable is kept. The step model's covariance is its closed form's."""
+        """The parameters after a solve: the joint Gauss-Newton step of the estimated blocks (:meth:`joint_step`, at
+        the solved ``poses`` / ``values`` with the fixes ``use`` the graph had), else (a singular joint system) each
+        block's closed form given the ``poses``; a block that is not observable is kept. The step model's covariance
+        is its closed form's."""
         problem, lay, fusion = self.problem, self.layout, self.fusion
         out, cov = p.copy(), None
         step_scale_std, scale_std = self.step_scale_prior_std, self.scale_prior_std.copy()
@@ -338,8 +338,8 @@ class Calibration:
 
         def on_rows(rows_of: np.ndarray, derivative: np.ndarray, design: np.ndarray, per: int) -> scipy.sparse.csc_matrix:
             """(n_rows, k) sparse columns: each measurement's rows (``per`` of them) times its row of ``design``."""
-            values_ = scipy.sparse.csr_matrix(np.repeat(design, per, axis=0)).multiply(derivative[rows_of, None]).tocoo()
-            return scipy.sparse.csc_matrix((values_.data, (rows_of[values_.row], values_.col)),
+            entries = scipy.sparse.csr_matrix(np.repeat(design, per, axis=0)).multiply(derivative[rows_of, None]).tocoo()
+            return scipy.sparse.csc_matrix((entries.data, (rows_of[entries.row], entries.col)),
                                            shape=(n_rows, design.shape[1]))
 
         names, columns, now, mean, info = [], [], [], [], []
@@ -400,13 +400,13 @@ class Calibration:
             cov = np.linalg.inv(s_red + prior)
             for name in ("step_scale", "stride_scales"):  # length scales: GNSS's information capped
                 if name in at:
-                    s = at[name]
-                    info_prior = np.diag(prior)[s].copy()
-                    info_white = np.maximum(1.0 / np.diag(cov)[s] - info_prior, 0.0)
+                    block = at[name]
+                    info_prior = np.diag(prior)[block].copy()
+                    info_white = np.maximum(1.0 / np.diag(cov)[block] - info_prior, 0.0)
                     info_cap = self.gnss_scale_info(poses, use, self.scale_spans(name))
                     capped = info_white > info_cap
                     # the capped posterior mean = the white-noise one with a prior of info_prior * info_white / info_cap
-                    prior[s, s] = np.diag(np.where(capped, info_prior * info_white / np.maximum(info_cap, 1e-12),
+                    prior[block, block] = np.diag(np.where(capped, info_prior * info_white / np.maximum(info_cap, 1e-12),
                                                    info_prior))
                     capped_std[name] = 1.0 / np.sqrt(np.minimum(info_white, info_cap) + info_prior)
             step = np.linalg.solve(s_red + prior, r_red - prior @ (q_now - q_prior))
