@@ -198,12 +198,13 @@ def sensor_above_hip_m(subject: dict | None) -> float:
     return max(float(sensor) - float(hip), 0.0)
 
 
-def _lowpass(x: np.ndarray, rate_hz: float) -> np.ndarray:
-    """Zero-lag low-pass at ``KINEMATICS_CUTOFF_HZ`` (second-order Butterworth, forward and backward)."""
+def _lowpass(x: np.ndarray, rate_hz: float, every: int = 1) -> np.ndarray:
+    """Zero-lag low-pass at ``KINEMATICS_CUTOFF_HZ`` (second-order Butterworth, forward and backward) of each column
+    of ``x``, then every ``every``-th sample (a column at a time: a long recording's filter copies stay a column's)."""
     if rate_hz <= 2.5 * KINEMATICS_CUTOFF_HZ:
-        return x
+        return x[::every].copy()
     sos = butter(2, KINEMATICS_CUTOFF_HZ, fs=rate_hz, output="sos")
-    return sosfiltfilt(sos, x, axis=0)
+    return np.stack([sosfiltfilt(sos, x[:, j])[::every] for j in range(x.shape[1])], axis=1)
 
 
 def _complementary_speed(t_s: np.ndarray, a_fwd_mps2: np.ndarray, lever_mps: np.ndarray, seg: np.ndarray,
@@ -251,11 +252,11 @@ def trunk_motion(u: UniformImu, t_start_s: np.ndarray, t_end_s: np.ndarray, spee
     seg = _segments(t_s, t_start_s, t_end_s)
     seg = np.where(u.valid[::every], seg, -1)
     bad = np.bincount(seg[seg >= 0], minlength=n) < 2
-    acc = _lowpass(u.acc_mps2, u.rate_hz)[::every]
+    acc = _lowpass(u.acc_mps2, u.rate_hz, every)
     if u.gyr_radps is None:
         angle = None
     else:  # the integrated rate at each sample's own time (trapezoid rule)
-        angle = ((np.cumsum(u.gyr_radps, axis=0) - 0.5 * u.gyr_radps) / u.rate_hz)[::every]
+        angle = (np.cumsum(u.gyr_radps, axis=0)[::every] - 0.5 * u.gyr_radps[::every]) / u.rate_hz
     # the mean over one stride (a step each side) inside the steps, MEAN_TILT_WINDOW_S elsewhere
     stride_s = np.where(seg >= 0, 2.0 * (t_end_s - t_start_s)[np.maximum(seg, 0)], MEAN_TILT_WINDOW_S)
     up = _up_in_sensor(acc, angle, stride_s * rate)
@@ -281,7 +282,7 @@ def trunk_motion(u: UniformImu, t_start_s: np.ndarray, t_end_s: np.ndarray, spee
     a_fwd = a_h @ fwd
     lever = np.zeros(len(t_s))  # the velocity of the sensor about the hips, omega x r, along the forward axis
     if u.gyr_radps is not None and sensor_above_hip_m > 0:
-        lever = np.cross(_lowpass(u.gyr_radps, u.rate_hz)[::every], sensor_above_hip_m * up) @ fwd
+        lever = np.cross(_lowpass(u.gyr_radps, u.rate_hz, every), sensor_above_hip_m * up) @ fwd
     dv, _ = detrended_double(a_fwd)
     dv -= lever - _per_segment_mean(lever, seg, n)[np.maximum(seg, 0)]
     if np.sum(dv[ok] * z[ok]) > 0:  # forward speed lowest when the trunk is highest

@@ -282,6 +282,7 @@ class SensorFaultDetection(Algorithm):
         norm = moving_average(norm_raw, n_win)
         up = gravity_direction_lowpass(acc, 1.0 / med_dt, window_s=self.gravity_window_s)
         dip = moving_average(np.arcsin(np.clip(np.einsum("ij,ij->i", x, up) / np.maximum(norm_raw, 1e-9), -1, 1)), n_win)
+        del up
         # the averaged accelerometer is gravity only where its magnitude is g (a turn adds a centripetal part)
         mean_acc = np.linalg.norm(moving_average(acc, int(round(self.gravity_window_s / med_dt))), axis=1)
         level = np.abs(mean_acc / GRAVITY_MPS2 - 1.0) <= GRAVITY_TOLERANCE
@@ -297,13 +298,17 @@ class SensorFaultDetection(Algorithm):
             n_short = max(1, int(round(MAG_DERIVATIVE_SMOOTH_S / med_dt)))
             b = moving_average(x, n_short)
             w = moving_average(gyr, n_short)
-            residual = np.gradient(b, t, axis=0) + np.cross(w, b)
-            # an uncalibrated magnetometer's hard-iron offset h turns with the sensor: residual = w x h, linear in h
-            skew = np.zeros((len(w), 3, 3))
-            skew[:, 0, 1], skew[:, 0, 2], skew[:, 1, 2] = -w[:, 2], w[:, 1], -w[:, 0]
-            skew[:, 1, 0], skew[:, 2, 0], skew[:, 2, 1] = w[:, 2], -w[:, 1], w[:, 0]
-            hard_iron = np.linalg.lstsq(skew.reshape(-1, 3), residual.reshape(-1), rcond=None)[0]
-            residual -= skew @ hard_iron
+            residual = np.gradient(b, t, axis=0)
+            residual += np.cross(w, b)
+            del b
+            # an uncalibrated magnetometer's hard-iron offset h turns with the sensor: residual = w x h, linear in h;
+            # its least squares through the 3x3 normal equations, sum(|w|^2 I - w w^T) h = sum(r x w) (min-norm where
+            # the rotations leave a direction of h unseen), so no (samples x 3 x 3) matrix is held
+            normal = np.einsum("ij,ij->", w, w) * np.eye(3) - w.T @ w
+            r_cross_w = [residual[:, (k + 1) % 3] @ w[:, (k + 2) % 3] - residual[:, (k + 2) % 3] @ w[:, (k + 1) % 3]
+                         for k in range(3)]
+            hard_iron = np.linalg.lstsq(normal, np.array(r_cross_w), rcond=None)[0]
+            residual -= np.cross(w, hard_iron)
             r = moving_average(np.linalg.norm(residual, axis=1), n_win)
             off |= r > max(self.mag_rotation_factor * float(np.median(r)), MAG_ROTATION_FLOOR_UTPS)
         med_norm, med_dip = float(np.median(norm)), float(np.median(dip))

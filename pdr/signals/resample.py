@@ -59,7 +59,9 @@ def moving_average(x: np.ndarray, n: int, axis: int = 0) -> np.ndarray:
     lo = np.clip(idx - half, 0, x.shape[0])
     hi = np.clip(idx + half + 1, 0, x.shape[0])
     shape = (-1,) + (1,) * (x.ndim - 1)
-    out = (c[hi] - c[lo]) / (hi - lo).reshape(shape)
+    out = c[hi]  # in place from here: a long recording holds few arrays of its size at once
+    out -= c[lo]
+    out /= (hi - lo).reshape(shape)
     return np.moveaxis(out, 0, axis)
 
 
