@@ -147,6 +147,15 @@ def test_the_calibration_converges_to_the_joint_optimum(tmp_path):
     assert not any("did not converge" in w["message"] for w in summary["warnings"])
 
 
+def test_an_unconverged_heading_calibration_is_said(walk):
+    # without GNSS nothing of the step model is calibrated, but the gyro bias and the magnetometer deviation are: when
+    # their alternation stops short, the run says so (it kept no step model, so it does not say that)
+    fusion = FactorGraphFusion(max_alternations=1)
+    with warns(r"did not converge in 1 alternations .*largest in the (gyro bias|magnetometer deviation)\)$") as caught:
+        fusion.fuse(walk["steps"])
+    assert not fusion.solver_["converged"] and not any("step model given is kept" in m for m in caught)
+
+
 def test_joint_step_agrees_with_the_normal_equations():
     # the banded Cholesky solve of the poses' normal matrix and the sparse LU give the same answer; a wide band falls
     # back to the LU

@@ -184,7 +184,9 @@ class Calibration:
                       else np.ones(3))
         src = self.src
         mean_stride = np.bincount(src, problem.stride_length_m, n_src) / np.maximum(np.bincount(src, minlength=n_src), 1)
-        self.scale_m = np.concatenate([feat_scale, np.full(nb, 0.5 * fusion.gyro_bias_knot_s ** 2 * mean_speed),
+        # a bias knot turns the path over a knot's span, or over the whole walk when it is shorter
+        bias_span_s = min(fusion.gyro_bias_knot_s, float(problem.epoch_t_s[-1] - problem.epoch_t_s[0])) if n else 1.0
+        self.scale_m = np.concatenate([feat_scale, np.full(nb, 0.5 * bias_span_s ** 2 * mean_speed),
                                        np.full(n_dev, 10.0 * mean_length), mean_stride, [mean_length]])
         self.step_scale_prior_std = fusion.step_scale_prior_std
         if self.own_scale and step_model.covariance_matrix is not None:  # the model's own prior on its one parameter

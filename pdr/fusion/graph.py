@@ -283,12 +283,13 @@ class FactorGraphFusion(Algorithm):
             params = mixing.next(change_m, update.params, restart=not same_gate)  # restarted when the gate changes
             use = new_use
         last_change_m = float(np.max(np.abs(change_m), initial=0.0))
-        if not converged and (cal.calibrate or cal.scale_steps):
+        if not converged:
             blocks = cal.layout.labelled()
             worst = max(blocks, key=lambda b: np.max(np.abs(change_m[blocks[b]]), initial=0.0))
             what = "the GNSS gate still changing" if not same_gate else f"largest in the {worst}"
+            kept = "; the step model given is kept" if cal.calibrate or cal.scale_steps else ""
             warn(f"graph fusion: the calibration did not converge in {alternation} alternations (last change "
-                 f"{last_change_m:.3g} m > {self.alternation_tol_m:g} m, {what}); the step model given is kept")
+                 f"{last_change_m:.3g} m > {self.alternation_tol_m:g} m, {what}){kept}")
         t_marg = time.perf_counter()
         pos_std = np.full((problem.n_steps + 1, 2), np.nan)
         if self.compute_covariance:
