@@ -338,9 +338,10 @@ class Calibration:
         step_rows, heading_rows = np.arange(n_rows)[blocks["steps"]], np.arange(n_rows)[blocks["heading"]]
         stride_rows = np.arange(n_rows)[blocks["strides"]]
 
-        def on_rows(rows_of: np.ndarray, derivative: np.ndarray, design: np.ndarray, per: int) -> scipy.sparse.csc_matrix:
+        def on_rows(rows_of: np.ndarray, derivative: np.ndarray, design: np.ndarray, per: int):
             """(n_rows, k) sparse columns: each measurement's rows (``per`` of them) times its row of ``design``."""
-            entries = scipy.sparse.csr_matrix(np.repeat(design, per, axis=0)).multiply(derivative[rows_of, None]).tocoo()
+            repeated = scipy.sparse.csr_matrix(np.repeat(design, per, axis=0))
+            entries = repeated.multiply(derivative[rows_of, None]).tocoo()
             return scipy.sparse.csc_matrix((entries.data, (rows_of[entries.row], entries.col)),
                                            shape=(n_rows, design.shape[1]))
 
@@ -408,8 +409,8 @@ class Calibration:
                     info_cap = self.gnss_scale_info(poses, use, self.scale_spans(name))
                     capped = info_white > info_cap
                     # the capped posterior mean = the white-noise one with a prior of info_prior * info_white / info_cap
-                    prior[block, block] = np.diag(np.where(capped, info_prior * info_white / np.maximum(info_cap, 1e-12),
-                                                   info_prior))
+                    tighter = info_prior * info_white / np.maximum(info_cap, 1e-12)
+                    prior[block, block] = np.diag(np.where(capped, tighter, info_prior))
                     capped_std[name] = 1.0 / np.sqrt(np.minimum(info_white, info_cap) + info_prior)
             step = np.linalg.solve(s_red + prior, r_red - prior @ (q_now - q_prior))
         except np.linalg.LinAlgError:

@@ -35,7 +35,8 @@ def build_graph(problem: Problem, poses: np.ndarray, meas: Measurements, use: np
                 gnss_factor: str, huber_k: float, noise_length_m: np.ndarray | None = None
                 ) -> tuple[gtsam.NonlinearFactorGraph, dict[str, slice]]:
     """The factor graph at the current ``poses`` (which set the magnetometer deviation at each heading and the shift of
-    the ``"shifted"`` GNSS factors) with the fixes ``use``, and its rows (:func:`graph_rows`). ``noise_length_m``: the step lengths that set the step factors' noise (default: ``meas``'s own)."""
+    the ``"shifted"`` GNSS factors) with the fixes ``use``, and its rows (:func:`graph_rows`). ``noise_length_m``: the
+    step lengths that set the step factors' noise (default: ``meas``'s own)."""
     noise_length = meas.step_length_m if noise_length_m is None else noise_length_m
     graph = gtsam.NonlinearFactorGraph()
     if absolute:
