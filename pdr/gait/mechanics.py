@@ -164,12 +164,15 @@ def step_energies(t_s: np.ndarray, z_m: np.ndarray, v_mps: np.ndarray, t_start_s
 def _window_mean(x: np.ndarray, width_n: np.ndarray) -> np.ndarray:
     """Centred mean of ``x`` (N, 3) over a window of ``width_n[i]`` samples (fractional: the end samples weighted by
     the part inside; shrinking at the ends of the record)."""
-    c = np.concatenate([np.zeros((1, x.shape[1])), np.cumsum(x, axis=0)])  # c[k]: sum of the first k samples
-    i = np.arange(len(x)) + 0.5  # sample i covers [i, i + 1) in c's index
+    i = np.arange(len(x)) + 0.5  # sample i covers [i, i + 1) in the index of the running sums
     lo, hi = np.clip(i - 0.5 * width_n, 0, len(x)), np.clip(i + 0.5 * width_n, 0, len(x))
-    k = np.arange(len(c))
-    return np.stack([np.interp(hi, k, c[:, j]) - np.interp(lo, k, c[:, j]) for j in range(x.shape[1])], 1) / \
-        (hi - lo)[:, None]
+    k = np.arange(len(x) + 1)
+    out = np.empty(x.shape)
+    for j in range(x.shape[1]):  # a column at a time: a long recording holds one column's running sums
+        c = np.concatenate([[0.0], np.cumsum(x[:, j])])  # c[k]: sum of the first k samples
+        out[:, j] = np.interp(hi, k, c) - np.interp(lo, k, c)
+    out /= (hi - lo)[:, None]
+    return out
 
 
 def _up_in_sensor(acc_mps2: np.ndarray, angle_rad: np.ndarray | None, width_n: np.ndarray) -> np.ndarray:
@@ -180,7 +183,10 @@ def _up_in_sensor(acc_mps2: np.ndarray, angle_rad: np.ndarray | None, width_n: n
     up = _window_mean(acc_mps2, width_n)
     up /= np.maximum(np.linalg.norm(up, axis=1, keepdims=True), 1e-9)
     if angle_rad is not None:
-        up = up - np.cross(angle_rad - _window_mean(angle_rad, width_n), up)
+        turn = _window_mean(angle_rad, width_n)
+        np.subtract(angle_rad, turn, out=turn)
+        up -= np.cross(turn, up)
+        del turn
         up /= np.maximum(np.linalg.norm(up, axis=1, keepdims=True), 1e-9)
     return up
 
@@ -260,8 +266,10 @@ def trunk_motion(u: UniformImu, t_start_s: np.ndarray, t_end_s: np.ndarray, spee
     # the mean over one stride (a step each side) inside the steps, MEAN_TILT_WINDOW_S elsewhere
     stride_s = np.where(seg >= 0, 2.0 * (t_end_s - t_start_s)[np.maximum(seg, 0)], MEAN_TILT_WINDOW_S)
     up = _up_in_sensor(acc, angle, stride_s * rate)
+    del angle, stride_s  # here and below: a long recording's arrays freed once used
     a_up = np.einsum("ij,ij->i", acc, up)
     a_h = acc - a_up[:, None] * up
+    del acc
 
     def detrended_double(a):
         """Velocity half a sample after each sample and position at the samples (midpoint rule), both zero-mean
@@ -272,6 +280,7 @@ def trunk_motion(u: UniformImu, t_start_s: np.ndarray, t_end_s: np.ndarray, spee
         return v, _integrate_per_segment(v, seg, dt) - v * dt
 
     _, z = detrended_double(a_up)
+    del a_up
     # forward axis: principal direction of the step-averaged horizontal acceleration (lateral cancels over L/R)
     ok = seg >= 0
     a_hc = a_h - np.stack([_per_segment_mean(a_h[:, i], seg, n) for i in range(3)], 1)[np.maximum(seg, 0)]
@@ -279,10 +288,13 @@ def trunk_motion(u: UniformImu, t_start_s: np.ndarray, t_end_s: np.ndarray, spee
     b = np.clip((phase * WAVEFORM_BINS).astype(int), 0, WAVEFORM_BINS - 1)[ok]
     wave = np.stack([np.bincount(b, weights=a_hc[ok, i], minlength=WAVEFORM_BINS) for i in range(3)], 1)
     fwd = np.linalg.svd(wave, full_matrices=False)[2][0]
+    del a_hc, phase, b
     a_fwd = a_h @ fwd
+    del a_h
     lever = np.zeros(len(t_s))  # the velocity of the sensor about the hips, omega x r, along the forward axis
-    if u.gyr_radps is not None and sensor_above_hip_m > 0:
-        lever = np.cross(_lowpass(u.gyr_radps, u.rate_hz, every), sensor_above_hip_m * up) @ fwd
+    if u.gyr_radps is not None and sensor_above_hip_m > 0:  # (w x r up) . fwd = w . (r up x fwd)
+        lever = np.einsum("ij,ij->i", _lowpass(u.gyr_radps, u.rate_hz, every), np.cross(sensor_above_hip_m * up, fwd))
+    del up
     dv, _ = detrended_double(a_fwd)
     dv -= lever - _per_segment_mean(lever, seg, n)[np.maximum(seg, 0)]
     if np.sum(dv[ok] * z[ok]) > 0:  # forward speed lowest when the trunk is highest
