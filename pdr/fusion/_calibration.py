@@ -221,14 +221,21 @@ class Calibration:
         problem, lay, fusion = self.problem, self.layout, self.fusion
         out, cov = p.copy(), None
         step_scale_std, scale_std = self.step_scale_prior_std, self.scale_prior_std.copy()
-        if self.estimate_bias:
+        joint = self.joint_step(poses, values, p, use) if self.joint_blocks else None
+        solved = set() if joint is None else set(joint.params)
+        if joint is not None:
+            for name, value in joint.params.items():
+                out[lay.block(name)] = value  # a negative cadence slope is replaced by the bounded closed form below
+            step_scale_std = float(joint.std.get("step_scale", [step_scale_std])[0])
+            scale_std = joint.std.get("stride_scales", scale_std)
+        if self.estimate_bias and "bias" not in solved:
             resid = wrap_rad(np.diff(poses[:, 2]) - problem.dtheta_rad)
             ok = self.known_turn & (self.dt > 0)
             if ok.sum() >= 2:
                 out[lay.bias] = solve_series(self.bias0, self.t_step[ok], resid[ok], -self.dt[ok],
                                              problem.dtheta_std_rad[ok], fusion.gyro_bias_rw_radps_per_sqrt_s,
                                              fusion.gyro_bias_prior_std_radps).values
-        if self.has_mag.any():
+        if self.has_mag.any() and "deviation" not in solved:
             has_mag = self.has_mag
             heading = poses[1:, 2][has_mag]
             y = wrap_rad(problem.mag_rad[has_mag] - heading)
@@ -237,23 +244,18 @@ class Calibration:
             if inlier.any():
                 out[lay.deviation] = solve_deviation(y[inlier], heading[inlier], problem.mag_std_rad[has_mag][inlier],
                                                      fusion.mag_deviation_prior_std_rad)
-        if self.calibrate:
+        if self.calibrate:  # its covariance always; its value where the joint step gave none or a negative parameter
             ok = self.feats_ok
-            out[lay.theta], cov = solve_step_model(along_track(poses)[ok], problem.features[ok],
-                                                   problem.step_length_std_m[ok], self.model_prior, self.nonnegative)
-        if self.scale_steps:  # along = k x length + e, prior k ~ N(1, step_scale_prior_std^2)
+            theta, cov = solve_step_model(along_track(poses)[ok], problem.features[ok],
+                                          problem.step_length_std_m[ok], self.model_prior, self.nonnegative)
+            if "theta" not in solved or any(joint.params["theta"][j] < 0 for j in self.nonnegative):
+                out[lay.theta] = theta
+        if self.scale_steps and "step_scale" not in solved:  # along = k x length + e, prior k ~ N(1, std^2)
             ok = ~problem.gap
             k, k_cov = solve_step_model(along_track(poses)[ok], problem.step_length_m[ok, None],
                                         problem.step_length_std_m[ok], self.step_scale_prior)
             out[lay.step_scale], step_scale_std = float(k[0]), float(np.sqrt(k_cov[0, 0]))
-        joint = self.joint_step(poses, values, p, use) if self.joint_blocks else None
-        if joint is not None:
-            for name, value in joint.params.items():
-                if name != "theta" or all(value[j] >= 0 for j in self.nonnegative):  # else the bounded closed form
-                    out[lay.block(name)] = value
-            step_scale_std = float(joint.std.get("step_scale", [step_scale_std])[0])
-            scale_std = joint.std.get("stride_scales", scale_std)
-        elif self.estimate_scales:  # the joint system is singular: the closed form, conditional on the poses
+        if self.estimate_scales and "stride_scales" not in solved:  # the closed form, conditional on the poses
             k0, k1 = problem.stride_k[:, 0], problem.stride_k[:, 1]
             distance = np.linalg.norm(poses[k1, :2] - poses[k0, :2], axis=1)
             out[lay.stride_scales], scale_std = solve_stride_scales(

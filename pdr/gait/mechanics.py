@@ -208,7 +208,7 @@ def _lowpass(x: np.ndarray, rate_hz: float, every: int = 1) -> np.ndarray:
     """Zero-lag low-pass at ``KINEMATICS_CUTOFF_HZ`` (second-order Butterworth, forward and backward) of each column
     of ``x``, then every ``every``-th sample (a column at a time: a long recording's filter copies stay a column's)."""
     if rate_hz <= 2.5 * KINEMATICS_CUTOFF_HZ:
-        return x[::every].copy()
+        return x[::every]
     sos = butter(2, KINEMATICS_CUTOFF_HZ, fs=rate_hz, output="sos")
     return np.stack([sosfiltfilt(sos, x[:, j])[::every] for j in range(x.shape[1])], axis=1)
 

@@ -303,11 +303,12 @@ class SensorFaultDetection(Algorithm):
             del b
             # an uncalibrated magnetometer's hard-iron offset h turns with the sensor: residual = w x h, linear in h;
             # its least squares through the 3x3 normal equations, sum(|w|^2 I - w w^T) h = sum(r x w) (min-norm where
-            # the rotations leave a direction of h unseen), so no (samples x 3 x 3) matrix is held
-            normal = np.einsum("ij,ij->", w, w) * np.eye(3) - w.T @ w
-            r_cross_w = [residual[:, (k + 1) % 3] @ w[:, (k + 2) % 3] - residual[:, (k + 2) % 3] @ w[:, (k + 1) % 3]
-                         for k in range(3)]
-            hard_iron = np.linalg.lstsq(normal, np.array(r_cross_w), rcond=None)[0]
+            # the rotations leave a direction of h unseen), from the 3x3 sums W = sum w w^T and R = sum r w^T, so no
+            # (samples x 3 x 3) matrix is held
+            ww, rw = w.T @ w, residual.T @ w
+            normal = np.trace(ww) * np.eye(3) - ww
+            r_cross_w = np.array([rw[1, 2] - rw[2, 1], rw[2, 0] - rw[0, 2], rw[0, 1] - rw[1, 0]])
+            hard_iron = np.linalg.lstsq(normal, r_cross_w, rcond=None)[0]
             residual -= np.cross(w, hard_iron)
             r = moving_average(np.linalg.norm(residual, axis=1), n_win)
             off |= r > max(self.mag_rotation_factor * float(np.median(r)), MAG_ROTATION_FLOOR_UTPS)
