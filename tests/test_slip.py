@@ -7,11 +7,12 @@ import math
 import numpy as np
 import pytest
 
-from pdr.constants import GRAVITY_MPS2
+from pdr.constants import GRAVITY_MPS2, REFERENCE_CADENCE_HZ
 from pdr.errors import InputError, collect_warnings
 from pdr.slip import SlipBody, simulate_flow, simulate_step, stride_kinematics
 from pdr.slip.fit import SlipOpticalFlowStride, segment_strides
-from pdr.slip.model import SWING_DESCENT_FRACTION, SWING_MIN_KNEE_RAD
+from pdr.slip.model import HIP_HEIGHT_RATIO, SWING_DESCENT_FRACTION, SWING_MIN_KNEE_RAD
+from pdr.step_length.models import HEIGHT_STEP_RATIO, LEVEL_REL_STD
 from conftest import warns
 
 BODY = SlipBody()
@@ -183,7 +184,8 @@ def test_a_backward_window_gives_no_scale_and_no_crash():
 def test_swing_clearance_follows_the_measured_stride():
     # the fitted SLIP's own stride saturates near 1.0-1.2 m on rendered walks (true up to 1.6 m); the swing clearance,
     # which sets the flow-to-metres scale, is taken from the stride measured from the flow instead (a fixed point)
-    est = SlipOpticalFlowStride(camera_from_knee_m=0.3, focal_px=140.0, strides_per_fit=1, scale_windows=1)
+    est = SlipOpticalFlowStride(camera_from_knee_m=0.3, focal_px=140.0, strides_per_fit=1, scale_windows=1,
+                                clearance_from="flow")
     t, f, _, _ = _measured(est, (1.3, -0.2, math.radians(15), 12000.0))
     fits = est.estimate(t, f).fits_
     np.testing.assert_allclose(fits.clearance_stride_m, fits.length_m, rtol=0.01)  # converged, self-consistent
@@ -196,6 +198,25 @@ def test_swing_clearance_follows_the_measured_stride():
     assert np.all(est.fits_.length_m.to_numpy() != old.fits_.length_m.to_numpy())
     with pytest.raises(InputError, match="clearance_from"):
         SlipOpticalFlowStride(clearance_from="thigh").estimate(t, f)
+
+
+def test_swing_clearance_from_the_cadence_does_not_feed_back():
+    # the clearance stride is the pedometer rule's for the body's height at the measured cadence: the stride the
+    # camera measures does not set its own scale, and the walk ratio's spread joins the sigma through the gain
+    est = SlipOpticalFlowStride(camera_from_knee_m=0.3, focal_px=140.0, strides_per_fit=1, scale_windows=1)
+    assert est.clearance_from == "cadence"
+    t, f, _, _ = _measured(est, (1.3, -0.2, math.radians(15), 12000.0))
+    fits = est.estimate(t, f).fits_
+    height = est.body.leg_length_m / HIP_HEIGHT_RATIO
+    expected = 2.0 * HEIGHT_STEP_RATIO * height * (2.0 / fits.meas_duration_s) / REFERENCE_CADENCE_HZ
+    np.testing.assert_allclose(fits.clearance_stride_m, expected, rtol=1e-5)
+    g = fits.clearance_gain.to_numpy()
+    assert np.all((g > 0) & (g < 1))
+    assert np.all(fits.length_std_m >= g * LEVEL_REL_STD * fits.length_m - 1e-12)
+    longer = SlipOpticalFlowStride(**est.get_params()).estimate(t, 1.1 * f, segments=est.segments_).fits_
+    np.testing.assert_allclose(longer.clearance_stride_m, fits.clearance_stride_m, rtol=1e-12)  # timing only
+    flow = SlipOpticalFlowStride(**{**est.get_params(), "clearance_from": "flow"}).estimate(t, f).fits_
+    assert not np.allclose(flow.clearance_stride_m, fits.clearance_stride_m, rtol=0.01)
 
 
 def test_body_from_what_a_user_knows():
@@ -242,7 +263,8 @@ def test_impossible_mount_and_too_slow_video_give_no_stride():
 
 def test_a_runaway_swing_clearance_keeps_the_slip_clearance_with_a_wide_sigma():
     # a camera low over the floor (the most sensitive set-up)
-    est = SlipOpticalFlowStride(camera_from_knee_m=0.45, focal_px=140.0, strides_per_fit=1, scale_windows=1)
+    est = SlipOpticalFlowStride(camera_from_knee_m=0.45, focal_px=140.0, strides_per_fit=1, scale_windows=1,
+                                clearance_from="flow")
     t, f, _, _ = _measured(est, (1.3, -0.2, math.radians(15), 12000.0))
     assert est.estimate(t, f).fits_.clearance_converged.all()
     # a clearance law this steep makes the scale grow faster than the stride: the passes run away
@@ -260,7 +282,8 @@ def test_a_runaway_swing_clearance_keeps_the_slip_clearance_with_a_wide_sigma():
 
 def test_the_clearance_fixed_point_widens_the_sigma_by_its_gain():
     # s = m(s) d: a scale error e becomes e / (1 - g); a steeper clearance law has a larger gain and a wider sigma
-    est = SlipOpticalFlowStride(camera_from_knee_m=0.3, focal_px=140.0, strides_per_fit=1, scale_windows=1)
+    est = SlipOpticalFlowStride(camera_from_knee_m=0.3, focal_px=140.0, strides_per_fit=1, scale_windows=1,
+                                clearance_from="flow")
     t, f, _, _ = _measured(est, (1.3, -0.2, math.radians(15), 12000.0))
     gains = {}
     for ratio in (0.005, 0.025, 0.05):
