@@ -179,6 +179,10 @@ def test_a_backward_window_gives_no_scale_and_no_crash():
     fit = dict(flag="length", length_m=-0.4, m_per_px=0.002, length_std_m=0.05, meas_disp_px=-200.0, spread_m=0.0)
     est._clearance_from_flow([fit])
     assert fit["length_m"] == -0.4 and fit["clearance_converged"] and fit["flag"] == "length"
+    fit = dict(flag="length", length_m=-0.4, m_per_px=0.002, length_std_m=0.05, meas_disp_px=-200.0, spread_m=0.0,
+               meas_duration_s=1.1)
+    est._clearance_from_cadence([fit])  # the default: its clearance from the cadence leaves the window as it is too
+    assert fit["length_m"] == -0.4 and fit["clearance_gain"] == 0.0 and fit["flag"] == "length"
 
 
 def test_swing_clearance_follows_the_measured_stride():
