@@ -429,6 +429,11 @@ def _foot_rows(duration_s: float) -> list[dict]:
 
 # the rows of the groups read with the shank measured too
 SHANK_ROWS = ("stride length MAE", "strides found (of the true strides in the video)", "errors within 2 sigma")
+
+
+def _headline(rows: list[dict]) -> list[dict]:
+    """A variant group's rows that matter beside the group's own: MAE, found, within 2 sigma, worst walk, bias."""
+    return [r for r in rows if r["metric"] in SHANK_ROWS or r["metric"].startswith(("worst walk", "stride length bias"))]
 THESIS_MODEL = dict(swing_profile="parabola", integral_weight=0.0, duration_weight=50.0, length_from="model")
 
 
@@ -461,11 +466,9 @@ def run(quick: bool = False) -> list[dict]:
             true_body_results.append(dict(spec=spec, speed=v, camera=cam_name, texture=tex,
                                           **_score(est, kin, cam, t_range)))
         rows += _group_rows(name, data, results)
-        rows += [r for r in _group_rows(f"{name}, shank measured too (knee to ankle, +-1 cm)", data, shank_results)
-                 if r["metric"] in SHANK_ROWS or r["metric"].startswith(("worst walk", "stride length bias"))]
-        rows += [r for r in _group_rows(f"{name}, the walk's true body and mount given (thigh, knee height, camera "
-                                        "below the knee: the model's own error)", data, true_body_results)
-                 if r["metric"] in SHANK_ROWS or r["metric"].startswith(("worst walk", "stride length bias"))]
+        rows += _headline(_group_rows(f"{name}, shank measured too (knee to ankle, +-1 cm)", data, shank_results))
+        rows += _headline(_group_rows(f"{name}, the walk's true body and mount given (thigh, knee height, camera "
+                                      "below the knee: the model's own error)", data, true_body_results))
         rows += _group_rows(f"{name}, calibrated on one walk (each person's walk nearest {CALIBRATION_SPEED_MPS} m/s, "
                             "whatever its camera and floor; not scored)", data, _calibrated(results),
                             splits=("calibration", "texture"))

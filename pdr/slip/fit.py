@@ -422,18 +422,12 @@ class SlipOpticalFlowStride(Algorithm):
             if not (f["meas_disp_px"] > 0 and f["meas_duration_s"] > 0):
                 continue
             stride_m = 2.0 * walk_ratio_m_per_hz * 2.0 / f["meas_duration_s"]  # two steps at the cadence (steps/s)
-            p = (f["vx_mps"], f["vy_mps"], f["leg_angle_rad"], f["stiffness_npm"])
-            sim = self.simulate(p, f["stance_fraction"], clearance_stride_m=stride_m)
-            disp = float(np.trapezoid(sim[1], sim[0])) if sim is not None else 0.0
-            if disp <= 0:
+            if not self._rescale(f, stride_m):
                 continue
-            length_m = sim[2] * f["meas_disp_px"] / disp * self.length_scale
-            f["length_std_m"] *= length_m / f["length_m"]
-            f["length_m"], f["m_per_px"], f["clearance_stride_m"] = length_m, length_m / f["meas_disp_px"], stride_m
             gain = self._clearance_gain(f)
             if np.isfinite(gain):
                 f["clearance_gain"] = gain
-                f["length_std_m"] = math.hypot(f["length_std_m"], max(gain, 0.0) * LEVEL_REL_STD * length_m)
+                f["length_std_m"] = math.hypot(f["length_std_m"], max(gain, 0.0) * LEVEL_REL_STD * f["length_m"])
 
     def _clearance_from_flow(self, fits: list[dict]) -> None:
         """Re-derive each window's flow-to-metres scale with the swing clearance of the measured stride.
@@ -460,16 +454,8 @@ class SlipOpticalFlowStride(Algorithm):
             lengths = np.array([np.nan if f["flag"] else f["length_m"] for f in fits]) / self.length_scale
             ref = _running_median(lengths, half)  # the length scale stays a pure factor
             for j, f in enumerate(fits):
-                if not (np.isfinite(ref[j]) and f["meas_disp_px"] > 0):
-                    continue
-                p = (f["vx_mps"], f["vy_mps"], f["leg_angle_rad"], f["stiffness_npm"])
-                sim = self.simulate(p, f["stance_fraction"], clearance_stride_m=ref[j])
-                disp = float(np.trapezoid(sim[1], sim[0])) if sim is not None else 0.0
-                if disp <= 0:
-                    continue
-                length_m = sim[2] * f["meas_disp_px"] / disp * self.length_scale
-                f["length_std_m"] *= length_m / f["length_m"]
-                f["length_m"], f["m_per_px"], f["clearance_stride_m"] = length_m, length_m / f["meas_disp_px"], ref[j]
+                if np.isfinite(ref[j]) and f["meas_disp_px"] > 0:
+                    self._rescale(f, ref[j])
         # a fixed point still moving in the last pass runs away (a camera low over the floor, long strides of a short
         # leg: the scale grows faster than the stride), and one that moved the stride over twice as far as its
         # first pass did multiplies the fit's error as much (x 1 / (1 - gain) for a map of that gain): keep the
@@ -494,18 +480,36 @@ class SlipOpticalFlowStride(Algorithm):
                 if np.isfinite(gain) and gain < 1.0:
                     f["length_std_m"] /= 1.0 - max(gain, 0.0)
 
+    def _simulated_stride(self, fit: dict, clearance_stride_m: float) -> tuple[float, float] | None:
+        """(stride m, image displacement px) of a window's fitted SLIP re-simulated with the swing clearance of
+        ``clearance_stride_m``; None when the simulation fails or does not move the image forward."""
+        p = (fit["vx_mps"], fit["vy_mps"], fit["leg_angle_rad"], fit["stiffness_npm"])
+        sim = self.simulate(p, fit["stance_fraction"], clearance_stride_m=clearance_stride_m)
+        disp = float(np.trapezoid(sim[1], sim[0])) if sim is not None else 0.0
+        return (sim[2], disp) if disp > 0 else None
+
+    def _rescale(self, fit: dict, clearance_stride_m: float) -> bool:
+        """Give a window the length, scale and sigma of the swing clearance of ``clearance_stride_m`` (its measured
+        image displacement kept); False, the window unchanged, when that simulation fails."""
+        sim = self._simulated_stride(fit, clearance_stride_m)
+        if sim is None:
+            return False
+        length_m = sim[0] * fit["meas_disp_px"] / sim[1] * self.length_scale
+        fit["length_std_m"] *= length_m / fit["length_m"]
+        fit["length_m"], fit["m_per_px"] = length_m, length_m / fit["meas_disp_px"]
+        fit["clearance_stride_m"] = clearance_stride_m
+        return True
+
     def _clearance_gain(self, fit: dict) -> float:
         """d ln(stride) / d ln(clearance stride) of a window at its fixed point: how much a stride longer than the
         window's grows its own flow-to-metres scale through the swing clearance (finite difference of 5%)."""
-        p = (fit["vx_mps"], fit["vy_mps"], fit["leg_angle_rad"], fit["stiffness_npm"])
         ref = fit["clearance_stride_m"]
         out = []
         for s in (ref, GAIN_STEP * ref):
-            sim = self.simulate(p, fit["stance_fraction"], clearance_stride_m=s)
-            disp = float(np.trapezoid(sim[1], sim[0])) if sim is not None else 0.0
-            if disp <= 0:
+            sim = self._simulated_stride(fit, s)
+            if sim is None:
                 return float("nan")
-            out.append(sim[2] / disp)
+            out.append(sim[0] / sim[1])
         return math.log(out[1] / out[0]) / math.log(GAIN_STEP)
 
     def _grid(self, stance_fraction: float) -> list[tuple]:
