@@ -26,17 +26,18 @@ import time
 import cv2
 import numpy as np
 
-from pdr.flow import CorrelationOpticalFlow, InterpolationOpticalFlow, PhaseCorrelationOpticalFlow
+from pdr.flow import CorrelationOpticalFlow, HomographyCameraMotion, InterpolationOpticalFlow, PhaseCorrelationOpticalFlow
 from pdr.errors import collect_warnings
-from pdr.pipelines.leg_camera import flow_defaults, forward_flow
+from pdr.pipelines.calibrate import SCALE_SPREADS
+from pdr.pipelines.leg_camera import cut_strides, flow_defaults, forward_flow
 from pdr.sim.camera import TEXTURES, CameraModel, load_texture, render_leg_camera
 from pdr.sim.gait import WalkKinematics
 from pdr.sim.people import FOOT_RATIO, KNEE_SCALE_SD, LEG_SCALE_SD, Body, GaitUser, plan_walk
 from pdr.sim.simulator import MEASURE_STD_M, MOUNT_STD_M
 from pdr.sim.route import Route
 from pdr.pipelines.calibrate import KNOWN_DISTANCE_REL_STD
-from pdr.slip.fit import SlipOpticalFlowStride, calibrated_length_scale
-from pdr.slip.model import SlipBody
+from pdr.slip import FloorOdometryStride, SlipOpticalFlowStride, calibrated_length_scale
+from pdr.slip.model import ANKLE_HEIGHT_RATIO, SlipBody
 
 AREA = "leg_camera"
 THESIS = "Liu MS thesis"
@@ -120,8 +121,13 @@ def _speed_rows() -> list[dict]:
     t0 = time.perf_counter()
     est.estimate(frames, t)
     fps = 60 / (time.perf_counter() - t0)
+    motion = HomographyCameraMotion(focal_px=500.0, cx_px=319.5, cy_px=239.5)
+    t0 = time.perf_counter()
+    motion.estimate(frames, t)
+    motion_fps = 60 / (time.perf_counter() - t0)
     return [_row("640x480 video", "correlation flow speed (3x3 patches of 48 px, +/-16 px)", fps, "frames/s", ">= 60",
-                 "thesis: offline, no speed given")]
+                 "thesis: offline, no speed given"),
+            _row("640x480 video", "homography camera motion speed (quartered to 160x120)", motion_fps, "frames/s", "-", "-")]
 
 
 @dataclasses.dataclass
@@ -162,19 +168,22 @@ def _walk_of(p: Person, speed_mps: float, duration_s: float) -> WalkKinematics:
 
 
 def _render(kin, cam, texture, duration_s, seed):
+    """The walk's flow and camera motion, the render time per frame and the two measurements' frames per second."""
     t0 = time.perf_counter()
     frames, table = render_leg_camera(kin, cam, 0.5, duration_s + 1.5, load_texture(texture), seed=seed)
     render_s = (time.perf_counter() - t0) / len(frames)
     t0 = time.perf_counter()
     flow = CorrelationOpticalFlow(**flow_defaults(*frames.shape[1:])).estimate(frames, table.t_s).flow_
-    return flow, render_s, len(frames) / (time.perf_counter() - t0)
+    flow_fps = len(frames) / (time.perf_counter() - t0)
+    t0 = time.perf_counter()
+    motion = HomographyCameraMotion(focal_px=cam.focal_px, cx_px=cam.cx_px, cy_px=cam.cy_px).estimate(frames, table.t_s).motion_
+    return flow, motion, render_s, flow_fps, len(frames) / (time.perf_counter() - t0)
 
 
-def estimator_for(p: Person, cam: CameraModel, *, shank_measured: bool = False, **params) -> SlipOpticalFlowStride:
-    """The estimator as a user sets it up: body from the height and the measured leg length (and, if
-    ``shank_measured``, the shank, knee to ankle), the mount measured; ``params`` override any of it."""
-    shank = {"shank_length_m": p.known["shank_length_m"]} if shank_measured else {}
-    body = SlipBody.from_user(p.known["height_m"], leg_length_m=p.known["leg_length_m"], **shank)
+def estimator_for(p: Person, cam: CameraModel, **params) -> SlipOpticalFlowStride:
+    """The SLIP-OF as a user sets it up: body from the height and the measured leg length, the mount measured;
+    ``params`` override any of it."""
+    body = SlipBody.from_user(p.known["height_m"], leg_length_m=p.known["leg_length_m"])
     return SlipOpticalFlowStride(**{"thigh_length_m": body.thigh_length_m, "shank_length_m": body.shank_length_m,
                                     "foot_length_m": body.foot_length_m, "focal_px": cam.focal_px, "foot": cam.side,
                                     "camera_from_knee_m": cam.distance_from_knee_m + p.known["mount_error_m"],
@@ -186,6 +195,27 @@ def true_body_params(p: Person, cam: CameraModel) -> dict:
     (knee to floor, the SLIP's shank) and the camera's exact mount."""
     return dict(thigh_length_m=p.body.thigh_m, shank_length_m=p.body.shank_m + p.body.ankle_height_m,
                 camera_from_knee_m=cam.distance_from_knee_m)
+
+
+def odometry_for(p: Person, cam: CameraModel, *, shank_measured: bool = False, true_body: bool = False,
+                 **params) -> FloorOdometryStride:
+    """The floor odometry as a user sets it up (the knee's height from the height and the measured leg length, or
+    the measured shank; the mount measured), or with the walk's ``true_body`` and mount; ``params`` override."""
+    if true_body:
+        body = dict(shank_length_m=p.body.shank_m + p.body.ankle_height_m, ankle_height_m=p.body.ankle_height_m,
+                    camera_from_knee_m=cam.distance_from_knee_m)
+    else:
+        shank = {"shank_length_m": p.known["shank_length_m"]} if shank_measured else {}
+        slip = SlipBody.from_user(p.known["height_m"], leg_length_m=p.known["leg_length_m"], **shank)
+        body = dict(shank_length_m=slip.shank_length_m, ankle_height_m=ANKLE_HEIGHT_RATIO * p.known["height_m"],
+                    camera_from_knee_m=cam.distance_from_knee_m + p.known["mount_error_m"])
+    return FloorOdometryStride(**{**body, "foot": cam.side, **params})
+
+
+def _fit_odometry(est, motion):
+    with collect_warnings():
+        est.estimate(motion, cut_strides(motion))
+    return est
 
 
 def _fit(est, flow):
@@ -215,31 +245,39 @@ def _score(est, kin, cam, t_range) -> dict:
     in failed fits."""
     pairs, n_true = _matched(est, kin, cam.side, t_range)
     failed = 0
-    if len(est.fits_) and "flag" in est.fits_:
-        failed = int(round(n_true * est.fits_.flag.astype(bool).to_numpy().mean()))
+    fits = getattr(est, "fits_", None)
+    if fits is not None and len(fits) and "flag" in fits:
+        failed = int(round(n_true * fits.flag.astype(bool).to_numpy().mean()))
     return dict(pairs=pairs, n_true=n_true, n_failed=failed)
 
 
-def _calibrated(results: list[dict]) -> list[dict]:
-    """Each person's walks other than the calibration walk (``CALIBRATION_SPEED_MPS``), fitted with the scale
-    ``pdr calibrate`` would store (:func:`pdr.slip.calibrated_length_scale`) from that walk: its known length the true
-    length of the strides the estimator found there (a distance measured to 1%), against their fitted length at
-    scale 1. The body and the scale carry over to the other walks; the camera's intrinsics and mount are those of
-    each walk's own set-up. A person whose calibration walk gives no stride has no calibrated walk."""
+def _calibrated(results: list[dict], method: str = "odometry") -> list[dict]:
+    """Each person's walks other than the calibration walk (``CALIBRATION_SPEED_MPS``), read by the stride ``method``
+    ("odometry" or "slip_of") with the scale ``pdr calibrate`` would store (:func:`pdr.slip.calibrated_length_scale`
+    with the method's spreads) from that walk: its known length the true length of the strides the estimator found
+    there (a distance measured to 1%), against their length at scale 1. The body and the scale carry over to the
+    other walks; the camera's intrinsics and mount are those of each walk's own set-up. A person whose calibration
+    walk gives no stride has no calibrated walk."""
     out = []
+    person_std, walk_std = SCALE_SPREADS[method]
     for spec in dict.fromkeys(r["spec"] for r in results):
         walks = [r for r in results if r["spec"] == spec]
         cal = min(walks, key=lambda r: (abs(r["speed"] - CALIBRATION_SPEED_MPS), r["speed"]))
         if not len(cal["pairs"]):
             continue
         known = float(cal["pairs"][:, 1].sum())
-        scale, _ = calibrated_length_scale([known], [float(cal["pairs"][:, 0].sum())],
-                                           [KNOWN_DISTANCE_REL_STD * known], [0])
+        scale, scale_std = calibrated_length_scale([known], [float(cal["pairs"][:, 0].sum())],
+                                                   [KNOWN_DISTANCE_REL_STD * known], [0], person_std=person_std,
+                                                   walk_std=walk_std)
         p = person(*spec)
         for r in walks:
             if r is not cal:
                 cam = CAMERAS[r["camera"]]
-                est = _fit(estimator_for(p, cam, length_scale=scale), r["flow"])
+                if method == "odometry":
+                    est = _fit_odometry(odometry_for(p, cam, length_scale=scale, length_scale_std=scale_std),
+                                        r["motion"])
+                else:
+                    est = _fit(estimator_for(p, cam, length_scale=scale), r["flow"])
                 same = "same camera set-up as" if r["camera"] == cal["camera"] else "other camera set-up than"
                 # the flow-alone readings do not depend on the calibration: they stay with the uncalibrated rows
                 kept = {k: v for k, v in r.items() if not k.startswith("true_")}
@@ -248,19 +286,21 @@ def _calibrated(results: list[dict]) -> list[dict]:
     return out
 
 
-def _walk_error_spread(results: list[dict]) -> tuple[float, float]:
-    """SD (%) of the walks' mean stride errors within a person (pooled) and of the people's means between them:
-    what :data:`pdr.slip.fit.SCALE_WALK_STD` and ``SCALE_PERSON_STD`` were read from (tuning group)."""
+def _walk_error_spread(results: list[dict]) -> tuple[float, float, float]:
+    """SD (%) of the walks' mean stride errors within a person (pooled), SD of the people's means between them and
+    their RMS about none: what the spreads of the per-user scale (:data:`pdr.slip.odometry.ODOMETRY_PERSON_STD` /
+    ``ODOMETRY_WALK_STD``, :data:`pdr.slip.fit.SCALE_PERSON_STD` / ``SCALE_WALK_STD``) were read from (tuning group)."""
     by_person: dict = {}
     for r in results:
         if len(r["pairs"]):
             by_person.setdefault(r["spec"], []).append(100 * np.mean(r["pairs"][:, 0] / r["pairs"][:, 1] - 1))
     groups = [np.array(v) for v in by_person.values() if len(v) >= 2]
     if not groups:
-        return np.nan, np.nan
+        return np.nan, np.nan, np.nan
     within = float(np.sqrt(sum(((g - g.mean()) ** 2).sum() for g in groups) / sum(len(g) - 1 for g in groups)))
     means = np.array([g.mean() for g in groups])
-    return within, float(np.std(means, ddof=1)) if len(means) >= 2 else np.nan
+    between = float(np.std(means, ddof=1)) if len(means) >= 2 else np.nan
+    return within, between, float(np.sqrt(np.mean(means ** 2)))
 
 
 def _true_camera_pose(kin, cam, t) -> tuple[np.ndarray, np.ndarray]:
@@ -346,9 +386,10 @@ def _group_rows(name: str, data: str, results: list[dict], splits: tuple[str, ..
         rows.append(_row(case, "stride length MAE of the same walks uncalibrated",
                          100 * np.mean(np.abs(before[:, 0] / before[:, 1] - 1)), "%", "-", "-"))
     elif results:
-        within, between = _walk_error_spread(results)
+        within, between, rms = _walk_error_spread(results)
         rows.append(_row(case, "walks' mean stride error, SD within a person (pooled)", within, "%", "-", "-"))
         rows.append(_row(case, "people's mean stride error, SD between them", between, "%", "-", "-"))
+        rows.append(_row(case, "people's mean stride error, RMS", rms, "%", "-", "-"))
     if worst is not None:
         w = results[worst]
         rows.append(_row(case, f"worst walk MAE ({w['spec'][0]:.2f} m, {w['speed']} m/s, {w['camera']}, {w['texture']})",
@@ -402,19 +443,22 @@ FOOT_FACTORS = (0.8, 1.25)
 
 
 def _foot_rows(duration_s: float) -> list[dict]:
-    """The tuning people with feet :data:`FOOT_FACTORS` times Winter's (1.2 m/s, 100 fps, gravel), read as a user
-    sets the estimator up (the toe lever Winter's foot for the height), then with the toe lever set to the true foot:
-    why :meth:`pdr.slip.model.SlipBody.from_user` takes no measured foot."""
-    errors: dict[str, list] = {"toe lever Winter's foot": [], "toe lever the true foot": []}
+    """The tuning people with feet :data:`FOOT_FACTORS` times Winter's (1.2 m/s, 100 fps, gravel), read by the floor
+    odometry and by the SLIP-OF as a user sets it up (the toe lever Winter's foot for the height), then with the
+    SLIP's toe lever set to the true foot: why :meth:`pdr.slip.model.SlipBody.from_user` takes no measured foot."""
+    errors: dict[str, list] = {"floor odometry": [], "SLIP-OF, toe lever Winter's foot": [],
+                               "SLIP-OF, toe lever the true foot": []}
     for spec in TUNING_PEOPLE:
         p0 = person(*spec)
         for factor in FOOT_FACTORS:
             p = Person(FootScaledBody(p0.body.height_m, p0.body.leg_scale, p0.body.knee_scale, foot_factor=factor),
                        p0.user, p0.known, p0.seed)
             kin = _walk_of(p, 1.2, duration_s)
-            flow, _, _ = _render(kin, CAM, "gravel", duration_s, seed=3)
-            for key, extra in zip(errors, ({}, {"foot_length_m": p.body.foot_m})):
-                pairs, _ = _matched(_fit(estimator_for(p, CAM, **extra), flow), kin, CAM.side)
+            flow, motion, _, _, _ = _render(kin, CAM, "gravel", duration_s, seed=3)
+            ests = [_fit_odometry(odometry_for(p, CAM), motion)]
+            ests += [_fit(estimator_for(p, CAM, **extra), flow) for extra in ({}, {"foot_length_m": p.body.foot_m})]
+            for key, est in zip(errors, ests):
+                pairs, _ = _matched(est, kin, CAM.side)
                 errors[key].append(pairs[:, 0] / pairs[:, 1] - 1)
     case = (f"tuning people with feet {' and '.join(map(str, FOOT_FACTORS))} x Winter's "
             f"({len(TUNING_PEOPLE) * len(FOOT_FACTORS)} walks, 1.2 m/s, 100 fps, gravel)")
@@ -443,35 +487,42 @@ def run(quick: bool = False) -> list[dict]:
     tuning = TUNING_PEOPLE[1:3] if quick else TUNING_PEOPLE
     test = TEST_PEOPLE[:2] if quick else TEST_PEOPLE
     speeds = SPEEDS_MPS[::2] if quick else SPEEDS_MPS
-    fit_times, render_ms, flow_fps = [], [], []
+    fit_times, render_ms, flow_fps, motion_fps = [], [], [], []
+    slip = "SLIP-OF ([leg_camera] method = \"slip_of\": the SLIP fitted to the flow)"
+    true_body = "the walk's true body and mount given (knee and ankle height, camera below the knee: the model's own error)"
     for name, data, people in (("tuning group", "in-sample", tuning), ("test group", "left out", test)):
-        results, shank_results, true_body_results = [], [], []
+        res: dict[str, list] = {k: [] for k in ("odometry", "shank", "true", "slip", "slip_true")}
         for spec, v, cam_name, tex in walk_cases(people, speeds, quick):
             p = person(*spec)
             cam = CAMERAS[cam_name]
             kin = _walk_of(p, v, duration)
-            flow, r_s, f_fps = _render(kin, cam, tex, duration, seed=len(render_ms))
+            flow, motion, r_s, f_fps, m_fps = _render(kin, cam, tex, duration, seed=len(render_ms))
             render_ms.append(1e3 * r_s)
             flow_fps.append(f_fps)
+            motion_fps.append(m_fps)
+            t_range = (float(flow.t_s.iloc[0]), float(flow.t_s.iloc[-1]))
+            walk = dict(spec=spec, speed=v, camera=cam_name, texture=tex, flow=flow, motion=motion, kin=kin,
+                        t_range=t_range)
+            for key, est in (("odometry", odometry_for(p, cam)), ("shank", odometry_for(p, cam, shank_measured=True)),
+                             ("true", odometry_for(p, cam, true_body=True))):
+                res[key].append({**walk, **_score(_fit_odometry(est, motion), kin, cam, t_range)})
             est = _fit(estimator_for(p, cam), flow)
             fit_times += est.fits_.time_s.tolist()
-            t_range = (float(flow.t_s.iloc[0]), float(flow.t_s.iloc[-1]))
-            results.append(dict(spec=spec, speed=v, camera=cam_name, texture=tex, **_score(est, kin, cam, t_range),
-                                true_geometry=_true_geometry_errors(kin, cam, flow, t_range),
-                                true_displacement=_true_displacement_errors(kin, cam, flow, t_range),
-                                flow=flow, kin=kin, t_range=t_range))
-            est = _fit(estimator_for(p, cam, shank_measured=True), flow)
-            shank_results.append(dict(spec=spec, speed=v, camera=cam_name, texture=tex, **_score(est, kin, cam, t_range)))
+            res["slip"].append({**walk, **_score(est, kin, cam, t_range),
+                                "true_geometry": _true_geometry_errors(kin, cam, flow, t_range),
+                                "true_displacement": _true_displacement_errors(kin, cam, flow, t_range)})
             est = _fit(estimator_for(p, cam, **true_body_params(p, cam)), flow)
-            true_body_results.append(dict(spec=spec, speed=v, camera=cam_name, texture=tex,
-                                          **_score(est, kin, cam, t_range)))
-        rows += _group_rows(name, data, results)
-        rows += _headline(_group_rows(f"{name}, shank measured too (knee to ankle, +-1 cm)", data, shank_results))
-        rows += _headline(_group_rows(f"{name}, the walk's true body and mount given (thigh, knee height, camera "
-                                      "below the knee: the model's own error)", data, true_body_results))
+            res["slip_true"].append({**walk, **_score(est, kin, cam, t_range)})
+        rows += _group_rows(name, data, res["odometry"])
+        rows += _headline(_group_rows(f"{name}, shank measured too (knee to ankle, +-1 cm)", data, res["shank"]))
+        rows += _headline(_group_rows(f"{name}, {true_body}", data, res["true"]))
         rows += _group_rows(f"{name}, calibrated on one walk (each person's walk nearest {CALIBRATION_SPEED_MPS} m/s, "
-                            "whatever its camera and floor; not scored)", data, _calibrated(results),
+                            "whatever its camera and floor; not scored)", data, _calibrated(res["odometry"]),
                             splits=("calibration", "texture"))
+        rows += _group_rows(f"{name}, {slip}", data, res["slip"])
+        rows += _headline(_group_rows(f"{name}, {slip}, {true_body}", data, res["slip_true"]))
+        rows += _headline(_group_rows(f"{name}, {slip}, calibrated on one walk", data,
+                                      _calibrated(res["slip"], "slip_of"), splits=()))
     if not quick:
         rows += _foot_rows(duration)
     # the thesis set-up (Liu §4.3-4.4): its Table 1 body walking its trial, 1.20 m strides (the markers), six strides
@@ -482,17 +533,21 @@ def run(quick: bool = False) -> list[dict]:
     user = dataclasses.replace(user, length_coef=user.length_coef * 0.60 / float(user.step_length_m(speed, thesis.leg_length_m)))
     thesis_person = Person(thesis, user, dict(height_m=thesis.height_m, leg_length_m=thesis.leg_length_m, mount_error_m=0.0), 7)
     kin = _walk_of(thesis_person, speed, duration)
-    flow, _, _ = _render(kin, CAM, "gravel", duration, seed=7)
+    flow, motion, _, _, _ = _render(kin, CAM, "gravel", duration, seed=7)
     table1 = dict(thigh_length_m=0.5, shank_length_m=0.6, mass_kg=50.0)
-    for key, extra in (("our fit", table1), ("thesis model", {**table1, **THESIS_MODEL}),
-                       ("our fit, toe lever set to Table 1's 0.2 m foot", {**table1, "foot_length_m": 0.2})):
-        pairs, _ = _matched(_fit(estimator_for(thesis_person, CAM, **extra), flow), kin, CAM.side)
+    fits = [("floor odometry", _fit_odometry(odometry_for(thesis_person, CAM, shank_length_m=0.6), motion))]
+    fits += [(f"{key}", _fit(estimator_for(thesis_person, CAM, **extra), flow))
+             for key, extra in (("SLIP-OF", table1), ("thesis model", {**table1, **THESIS_MODEL}),
+                                ("SLIP-OF, toe lever set to Table 1's 0.2 m foot", {**table1, "foot_length_m": 0.2}))]
+    for key, est in fits:
+        pairs, _ = _matched(est, kin, CAM.side)
         true = float(pairs[:, 1].mean()) if len(pairs) else float("nan")
         rows.append(_row(f"thesis set-up (Table 1 body, 0.8 m/s), true mean {true:.2f} m", f"stride length MAE, {key}",
                          100 * np.mean(np.abs(pairs[:, 0] / pairs[:, 1] - 1)) if len(pairs) else np.nan, "%", "<= 3",
                          f"10% ({THESIS}: 1.08 m vs 1.20 m)"))
-    rows.append(_row("two-stride window", "fit time incl. all starts (median)", np.median(fit_times), "s", "<= 0.5",
+    rows.append(_row("two-stride window", "SLIP fit time incl. all starts (median)", np.median(fit_times), "s", "<= 0.5",
                      "thesis: fmincon, 5 starts, no time given"))
     rows.append(_row("160x120 at 60-100 fps", "render time per frame", np.mean(render_ms), "ms", "-", "-"))
     rows.append(_row("160x120 at 60-100 fps", "correlation flow speed", np.mean(flow_fps), "frames/s", "-", "-"))
+    rows.append(_row("160x120 at 60-100 fps", "homography camera motion speed", np.mean(motion_fps), "frames/s", "-", "-"))
     return rows

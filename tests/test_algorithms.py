@@ -69,7 +69,8 @@ def _required(name: str, templates_factory):
 
     values = {"camera": ThighCameraModel, "templates": templates_factory, "k_m_per_root3_mps2": lambda: 0.55,
               "k_m_per_root4_mps2": lambda: 0.48, "k_scale": lambda: 1.0, "residual_std_m": lambda: 0.05,
-              "a_m": lambda: 0.3, "b_m_per_hz": lambda: 0.2, "c_m_per_m2ps4": lambda: 0.01}
+              "a_m": lambda: 0.3, "b_m_per_hz": lambda: 0.2, "c_m_per_m2ps4": lambda: 0.01,
+              "focal_px": lambda: 120.0, "cx_px": lambda: 79.5, "cy_px": lambda: 59.5}
     if name not in values:
         raise AssertionError(f"parameter {name!r} has no default: add an example value to _required in {__file__}")
     return values[name]()
@@ -211,6 +212,14 @@ def _flow(n: int = 600, rate_hz: float = 100.0):
     return t, 400.0 * np.clip(np.sin(2 * np.pi * t), 0.0, None) ** 2 - 20.0
 
 
+def _motion_and_segments():
+    from pdr.flow import HomographyCameraMotion
+    from pdr.pipelines.leg_camera import cut_strides
+
+    motion = HomographyCameraMotion(focal_px=120.0, cx_px=79.5, cy_px=59.5).estimate(*_frames()).motion_
+    return motion, cut_strides(motion)
+
+
 # class name -> (inputs from the fixtures) -> (the action's name, its arguments, its keyword arguments). The step
 # length models' ``fit`` is their calibration, which by design changes the parameters (DESIGN.md: a calibrated model
 # is the parameters); their action here is ``estimate``.
@@ -233,6 +242,8 @@ ACTIONS = {
     "AttitudeStepHeading": lambda w, r: ("estimate", (w["u"], w["attitude"], w["steps"]), {}),
     "SensorFaultDetection": lambda w, r: ("detect", (w["rec"].imu,), {}),
     "SlipOpticalFlowStride": lambda w, r: ("estimate", _flow(), {}),
+    "HomographyCameraMotion": lambda w, r: ("estimate", _frames(), {}),
+    "FloorOdometryStride": lambda w, r: ("estimate", _motion_and_segments(), {}),
     "RegressionStepLength": lambda w, r: ("estimate", (w["signal_steps"],), {}),
     "WeinbergStepLength": lambda w, r: ("estimate", (w["signal_steps"],), {}),
     "KimStepLength": lambda w, r: ("estimate", (w["signal_steps"],), {}),

@@ -241,28 +241,30 @@ def _camera_strides(t_contacts: np.ndarray, length_m: float) -> pd.DataFrame:
                          "length_m": length_m, "length_std_m": 0.1, "source": "leg_camera"})
 
 
-def test_leg_camera_scale_from_known_segments():
-    from pdr.pipelines.calibrate import leg_camera_scale
-    from pdr.slip.fit import SCALE_PERSON_STD, SCALE_WALK_STD
+@pytest.mark.parametrize("method", ["odometry", "slip_of"])
+def test_leg_camera_scale_from_known_segments(method):
+    from pdr.pipelines.calibrate import SCALE_SPREADS, leg_camera_scale
 
+    person_std, walk_std = SCALE_SPREADS[method]
     steps = pd.DataFrame({"t_s": 1.0 + 0.5 * np.arange(41)})  # 41 steps of 0.7 m (28.7 m) at 2 steps/s
     strides = _camera_strides(steps.t_s.to_numpy()[::2], 1.4 * 1.1)  # the camera foot's contacts, 10% long
     segs = pd.DataFrame({"rec_index": 0, "t_start_s": [1.0, 6.0, 11.0], "t_end_s": [6.0, 11.0, 21.0],
                          "n_steps": [10.0, 10.0, 20.0], "distance_m": [7.0, 7.0, 14.0], "measured_std_m": 0.001,
                          "used": True})
-    out = leg_camera_scale([strides], [steps], segs)
+    out = leg_camera_scale([strides], [steps], segs, method=method)
     assert out["measured_ratio"] == pytest.approx(1 / 1.1, rel=1e-6) and out["n_segments"] == 3
+    assert out["method"] == method
     # one walk of exactly known length moves the person's scale by w = person^2 / (person^2 + walk^2) of what it reads
-    w = SCALE_PERSON_STD ** 2 / (SCALE_PERSON_STD ** 2 + SCALE_WALK_STD ** 2)
+    w = person_std ** 2 / (person_std ** 2 + walk_std ** 2)
     assert out["length_scale"] - 1 == pytest.approx(w * (1 / 1.1 - 1), rel=0.01)
-    assert out["length_scale_std"] < SCALE_PERSON_STD and out["distance_m"] == 28.0 and out["n_strides"] == 20
+    assert out["length_scale_std"] < person_std and out["distance_m"] == 28.0 and out["n_strides"] == 20
     whole = pd.DataFrame({"rec_index": [0], "t_start_s": [1.0], "t_end_s": [21.0], "n_steps": [41.0],
                           "distance_m": [28.7], "measured_std_m": [0.001], "used": [True]})  # --distance-m: every step
-    assert leg_camera_scale([strides], [steps], whole)["measured_ratio"] == pytest.approx(1 / 1.1, rel=0.01)
+    assert leg_camera_scale([strides], [steps], whole, method=method)["measured_ratio"] == pytest.approx(1 / 1.1, rel=0.01)
     coarse = segs.assign(measured_std_m=0.5)  # phone-grade GNSS chords (5 m a segment): the scale moves less
-    assert 1 > leg_camera_scale([strides], [steps], coarse)["length_scale"] > out["length_scale"]
+    assert 1 > leg_camera_scale([strides], [steps], coarse, method=method)["length_scale"] > out["length_scale"]
     three = pd.concat([segs.assign(rec_index=r) for r in range(3)])  # three walks reading the same: a firmer scale
-    many = leg_camera_scale([strides] * 3, [steps] * 3, three)
+    many = leg_camera_scale([strides] * 3, [steps] * 3, three, method=method)
     assert many["n_walks"] == 3 and many["length_scale"] < out["length_scale"]
     assert many["length_scale_std"] < out["length_scale_std"]
     assert leg_camera_scale([None], [steps], segs) is None  # no camera: nothing to calibrate
@@ -273,19 +275,22 @@ def test_leg_camera_scale_from_known_segments():
 
 
 def test_model_file_leg_camera_scale_is_checked(tmp_path):
-    from pdr.step_length import leg_camera_length_scale
+    from pdr.step_length import leg_camera_calibration
 
     path = tmp_path / "model.json"
     save_model(ZijlstraStepLength.population(), path, {"length_scale": 0.95, "n_strides": 30})
-    assert leg_camera_length_scale(path) == 0.95
+    assert leg_camera_calibration(path) == {"method": "slip_of", "length_scale": 0.95}  # written before the odometry
+    save_model(ZijlstraStepLength.population(), path, {"method": "odometry", "length_scale": 0.95, "length_scale_std": 0.01})
+    assert leg_camera_calibration(path) == {"method": "odometry", "length_scale": 0.95, "length_scale_std": 0.01}
     save_model(ZijlstraStepLength.population(), path)
-    assert leg_camera_length_scale(path) is None
-    for bad in (0.2, "0.95", None, float("nan")):
+    assert leg_camera_calibration(path) is None
+    for key, bad in [("length_scale", v) for v in (0.2, "0.95", None, float("nan"))] + [("length_scale_std", -0.1),
+                                                                                        ("method", "visual")]:
         doc = json.loads(path.read_text())
-        doc["leg_camera"] = {"length_scale": bad}
+        doc["leg_camera"] = {"length_scale": 0.95, key: bad}
         path.write_text(json.dumps(doc))
-        with pytest.raises(InputError, match="leg_camera.length_scale"):
-            leg_camera_length_scale(path)
+        with pytest.raises(InputError, match=f"leg_camera.{key}"):
+            leg_camera_calibration(path)
 
 
 def test_cli_calibrate_a_leg_camera_walk_of_known_length(tmp_path, capsys):
@@ -302,6 +307,7 @@ def test_cli_calibrate_a_leg_camera_walk_of_known_length(tmp_path, capsys):
     assert "leg camera: " in capsys.readouterr().out
     doc = json.loads((tmp_path / "model.json").read_text())
     camera = doc["leg_camera"]
+    assert camera["method"] == "odometry"
     assert 0.85 < camera["measured_ratio"] < 0.97  # this person's strides read 3-15% long uncalibrated
     assert camera["measured_ratio"] < camera["length_scale"] < 1.0  # one walk: part of the way
     assert main(["run", str(rec), "-o", str(tmp_path / "out"), "--model", str(tmp_path / "model.json"), "--no-gnss"]) == 0
@@ -310,3 +316,8 @@ def test_cli_calibrate_a_leg_camera_walk_of_known_length(tmp_path, capsys):
     k = np.abs(ref.t_end_s.to_numpy()[None, :] - strides.t_end_s.to_numpy()[:, None]).argmin(axis=1)
     bias = np.mean(strides.length_m.to_numpy() / ref.length_m.to_numpy()[k] - 1)
     assert abs(bias - (camera["length_scale"] / camera["measured_ratio"] - 1)) < 0.01  # the scale applied, no other
+    slip = tmp_path / "slip.toml"
+    slip.write_text('[leg_camera]\nmethod = "slip_of"\n')
+    with warns("not applied"):  # a scale calibrated for the odometry is not the SLIP-OF's
+        assert main(["run", str(rec), "-o", str(tmp_path / "out_slip"), "--model", str(tmp_path / "model.json"),
+                     "--config", str(slip), "--no-gnss"]) == 0

@@ -62,24 +62,31 @@ def _recording(tmp_path, kin, texture="gravel", t_end=7.9) -> Recording:
                      imu=make_imu(8.0), camera=CAM.to_toml(), video_path=tmp_path / "video.avi", frames=table)
 
 
-def test_camera_strides_on_a_rendered_walk(tmp_path):
-    kin = WalkKinematics.steady(speed_mps=1.3, duration_s=7.0, seed=3)
-    rec = _recording(tmp_path, kin)
-    strides = camera_strides(rec, {})
-    assert list(strides.columns) == ["t_start_s", "t_end_s", "foot", "length_m", "length_std_m", "source"]
-    assert len(strides) >= 4 and (strides.source == "leg_camera").all() and (strides.foot == "left").all()
+def _matched_errors(strides, kin):
     true = kin.true_strides()
     true = true[true.foot == "left"]
     k = np.abs(true.t_start_s.to_numpy()[None, :] - strides.t_start_s.to_numpy()[:, None]).argmin(axis=1)
     np.testing.assert_allclose(strides.t_start_s, true.t_start_s.to_numpy()[k], atol=0.06)  # heel strikes from the flow
-    assert np.mean(np.abs(strides.length_m.to_numpy() / true.length_m.to_numpy()[k] - 1)) < 0.15
-    assert np.all(strides.length_std_m > 0)
+    return strides.length_m.to_numpy() / true.length_m.to_numpy()[k] - 1
+
+
+def test_camera_strides_on_a_rendered_walk(tmp_path):
+    kin = WalkKinematics.steady(speed_mps=1.3, duration_s=7.0, seed=3)
+    rec = _recording(tmp_path, kin)
+    strides = camera_strides(rec, {})  # the floor odometry: mid-stance to mid-stance, the last stride has no end
+    assert list(strides.columns) == ["t_start_s", "t_end_s", "foot", "length_m", "length_std_m", "source"]
+    assert len(strides) >= 3 and (strides.source == "leg_camera").all() and (strides.foot == "left").all()
+    assert np.mean(np.abs(_matched_errors(strides, kin))) < 0.05 and np.all(strides.length_std_m > 0)
+    slip = camera_strides(rec, {"leg_camera": {"method": "slip_of"}})
+    assert len(slip) >= 4 and np.mean(np.abs(_matched_errors(slip, kin))) < 0.15 and np.all(slip.length_std_m > 0)
     # the SLIP's toe lever is Winter's foot for the height: a measured foot, here far from it, moves no stride
     footed = {**rec.meta, "subject": {**rec.meta["subject"], "foot_length_m": 0.2}}
     again = camera_strides(Recording(meta=footed, imu=rec.imu, camera=rec.camera, video_path=rec.video_path,
-                                     frames=rec.frames), {})
-    pd.testing.assert_frame_equal(again, strides)
+                                     frames=rec.frames), {"leg_camera": {"method": "slip_of"}})
+    pd.testing.assert_frame_equal(again, slip)
     assert camera_strides(Recording(meta=rec.meta, imu=rec.imu), {}) is None  # no video: no strides
+    with pytest.raises(InputError, match=r"\[leg_camera\]"):
+        camera_strides(rec, {"leg_camera": {"method": "visual"}})
 
 
 def test_blank_floor_gives_no_confident_stride(tmp_path):

@@ -13,8 +13,9 @@ the first recording's ``[subject]`` and placement, :func:`pdr.step_length.body_m
 steps and metres it saw (atomically). Recordings with a leg camera also calibrate its strides' length scale on the
 same segments of known distance (:func:`leg_camera_scale`; the model file's ``leg_camera``, which ``pdr run
 --model`` applies). Configuration sections: ``[steps]``, ``[heading]`` (step detection), ``[step_length]``,
-``[calibration]`` (AdaptiveKalmanCalibration parameters), ``[gnss]`` (as ``pdr run``), ``[flow]`` and ``[slip_of]``
-(the leg camera, as ``pdr run``; its ``length_scale`` is what is calibrated, so it is not read).
+``[calibration]`` (AdaptiveKalmanCalibration parameters), ``[gnss]`` (as ``pdr run``), ``[leg_camera]``, ``[flow]``,
+``[homography]``, ``[odometry]`` and ``[slip_of]`` (the leg camera, as ``pdr run``; the method's ``length_scale`` is
+what is calibrated, so it is not read).
 """
 
 from __future__ import annotations
@@ -29,10 +30,12 @@ from pdr.calibration.segments import landmark_distances, trajectory_distances
 from pdr.config import load_config
 from pdr.errors import InputError, warn
 from pdr.io.recording import load_recording, read_csv
-from pdr.pipelines.leg_camera import camera_strides
+from pdr.pipelines.leg_camera import camera_strides, stride_method
 from pdr.pipelines.pipeline import gnss_local, gnss_settings
 from pdr.pipelines.steps import detect_steps
 from pdr.slip import calibrated_length_scale
+from pdr.slip.fit import SCALE_PERSON_STD, SCALE_WALK_STD
+from pdr.slip.odometry import ODOMETRY_PERSON_STD, ODOMETRY_WALK_STD
 from pdr.step_length import choose_model, save_model
 from pdr.step_length.io import LEG_CAMERA_SCALE_RANGE
 
@@ -50,8 +53,12 @@ def _step_index(t_s: np.ndarray, step_t_s: np.ndarray) -> np.ndarray:
     return np.interp(t_s, knots_t, np.arange(-1, len(step_t_s), dtype=float))
 
 
+# the person's and the walk's spreads of each leg-camera stride method's scale (the calibration's prior)
+SCALE_SPREADS = {"odometry": (ODOMETRY_PERSON_STD, ODOMETRY_WALK_STD), "slip_of": (SCALE_PERSON_STD, SCALE_WALK_STD)}
+
+
 def leg_camera_scale(strides_list: list[pd.DataFrame | None], steps_list: list[pd.DataFrame],
-                     segments: pd.DataFrame) -> dict | None:
+                     segments: pd.DataFrame, *, method: str = "odometry") -> dict | None:
     """The leg camera's length scale from segments of known distance (the ``model_segments_`` of
     :class:`AdaptiveKalmanCalibration`: the steps the step model is fitted on).
 
@@ -59,7 +66,8 @@ def leg_camera_scale(strides_list: list[pd.DataFrame | None], steps_list: list[p
     steps per stride); a segment whose strides cover at least :data:`MIN_CAMERA_COVERAGE` of its steps counts, its
     camera metres divided by the coverage. The scale is :func:`pdr.slip.calibrated_length_scale` of those (each
     segment's distance std ``measured_std_m x n_steps``: the GNSS chord's or the known distance's; the recordings
-    are the walks). Returns None when no recording has camera strides; warns when no segment is covered.
+    are the walks; the person's and the walk's spreads those of the stride ``method``, :data:`SCALE_SPREADS`).
+    Returns None when no recording has camera strides; warns when no segment is covered.
     """
     known, camera, known_std, walk, n_strides = [], [], [], [], 0
     have_strides = False
@@ -100,8 +108,9 @@ def leg_camera_scale(strides_list: list[pd.DataFrame | None], steps_list: list[p
         warn(f"calibrate: the leg camera's strides read {1.0 / ratio:.2f} x the known distance (outside "
              f"[{1 / hi_ok:.3g}, {1 / lo_ok:.3g}]): check camera.toml and [subject]; the camera's scale is not stored")
         return None
-    scale, scale_std = calibrated_length_scale(known, camera, known_std, walk)
-    return {"length_scale": scale, "length_scale_std": scale_std, "measured_ratio": ratio, "n_walks": len(set(walk)),
+    person_std, walk_std = SCALE_SPREADS[method]
+    scale, scale_std = calibrated_length_scale(known, camera, known_std, walk, person_std=person_std, walk_std=walk_std)
+    return {"method": method, "length_scale": scale, "length_scale_std": scale_std, "measured_ratio": ratio, "n_walks": len(set(walk)),
             "n_segments": len(known), "n_strides": n_strides, "distance_m": round(sum(known), 2)}
 
 
@@ -173,8 +182,9 @@ def calibrate_recordings(recs: list[Path], out: Path, config_path=None, *, dista
         raise InputError(f"calibrate: expected GNSS (gnss.csv) or a known distance (--distance-m, --landmarks, "
                          f"--trajectory) for every recording, found neither for {', '.join(without)}")
     model, choice = choose_model(config, recordings[0].subject, recordings[0].placement)
-    camera_config = {"flow": config.get("flow", {}),
-                     "slip_of": {k: v for k, v in (config.get("slip_of") or {}).items() if k != "length_scale"}}
+    method = stride_method(config)
+    camera_config = {key: dict(config.get(key) or {}) for key in ("leg_camera", "flow", "homography", method)}
+    camera_config[method] = {k: v for k, v in camera_config[method].items() if k not in ("length_scale", "length_scale_std")}
     steps_list, gnss_list, subjects, strides_list = [], [], [], []
     for rec, (kind, _) in zip(recordings, sources):
         strides_list.append(camera_strides(rec, camera_config))
@@ -194,7 +204,7 @@ def calibrate_recordings(recs: list[Path], out: Path, config_path=None, *, dista
         found = ", ".join(f"{n} {why}" for why, n in reasons.items()) or _why_no_segment(steps_list, gnss_list, akf)
         raise InputError(f"calibrate: expected segments of walking of known length (GNSS fixes, distances), found none "
                          f"usable in {len(recordings)} recording(s): {found}")
-    camera = leg_camera_scale(strides_list, steps_list, segs)
+    camera = leg_camera_scale(strides_list, steps_list, segs, method=method)
     save_model(akf.model_, out, camera, n_steps=int(round(akf.n_steps_)), distance_m=round(akf.distance_m_, 2), n_segments=int(segs["used"].sum()),
                n_segments_rejected=int((~segs["used"]).sum()), updated=akf.updated_,
                recordings=[rec.id for rec in recordings], sources=[kind for kind, _ in sources], prior=choice,

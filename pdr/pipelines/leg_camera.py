@@ -1,9 +1,12 @@
-"""Strides from a leg-camera video: optical flow, then the SLIP model fitted to it (Liu, MS thesis).
+"""Strides from a leg-camera video: the camera's floor odometry scaled by the leg (default), or the SLIP model fitted
+to the optical flow (Liu, MS thesis).
 
-Config sections: ``[flow]`` (CorrelationOpticalFlow parameters; defaults scaled to the frame size) and
-``[slip_of]`` (SlipOpticalFlowStride parameters; body lengths from the recording's ``[subject]`` by
-:meth:`pdr.slip.model.SlipBody.from_user`: the lengths given, Winter's ratios to the height for the others; the
-SLIP's foot, the lever of its toe pivot, Winter's for the height, not ``foot_length_m``).
+Config sections: ``[leg_camera] method = "odometry" | "slip_of"``; ``[homography]`` and ``[odometry]``
+(:class:`pdr.flow.HomographyCameraMotion` and :class:`pdr.slip.FloorOdometryStride` parameters; the image centre's
+flow of the homographies cuts the strides at heel strikes) or ``[flow]`` and ``[slip_of]`` (CorrelationOpticalFlow
+parameters, defaults scaled to the frame size, and SlipOpticalFlowStride parameters). Body lengths come from the
+recording's ``[subject]`` by :meth:`pdr.slip.model.SlipBody.from_user` (the lengths given, Winter's ratios to the
+height for the others; the SLIP's foot, the lever of its toe pivot, Winter's for the height, not ``foot_length_m``).
 """
 
 from __future__ import annotations
@@ -12,12 +15,24 @@ import numpy as np
 import pandas as pd
 
 from pdr.errors import InputError
-from pdr.flow import CameraModel, CorrelationOpticalFlow, read_video
+from pdr.flow import CameraModel, CorrelationOpticalFlow, HomographyCameraMotion, read_video
 from pdr.io.recording import Recording
-from pdr.slip.fit import SlipOpticalFlowStride
-from pdr.slip.model import SlipBody
+from pdr.slip import FloorOdometryStride, SlipOpticalFlowStride, segment_strides
+from pdr.slip.model import ANKLE_HEIGHT_RATIO, SlipBody
 
 DEFAULT_HEIGHT_M = 1.75  # a subject without a height: an adult of average height
+STRIDE_METHODS = ("odometry", "slip_of")  # [leg_camera] method; its parameters are the section of that name
+
+
+def stride_method(config: dict) -> str:
+    """The ``[leg_camera] method`` of a configuration (default "odometry"); its parameters are the section of that name."""
+    section = dict(config.get("leg_camera") or {})
+    unknown = sorted(set(section) - {"method"})
+    method = section.get("method", "odometry")
+    if unknown or method not in STRIDE_METHODS:
+        raise InputError(f"configuration [leg_camera]: expected only method = {' or '.join(map(repr, STRIDE_METHODS))}, "
+                         f"found {section!r}")
+    return method
 
 
 def forward_flow(flow: pd.DataFrame) -> np.ndarray:
@@ -46,10 +61,19 @@ def flow_defaults(height_px: int, width_px: int) -> dict:
             "blur_sigma_px": patch / 12.0}
 
 
+def cut_strides(flow: pd.DataFrame) -> pd.DataFrame:
+    """The camera leg's strides, heel strike to heel strike, cut from a flow series (``t_s, flow_x_pxps, flow_y_pxps,
+    quality``: :class:`CorrelationOpticalFlow`'s or :class:`HomographyCameraMotion`'s) by
+    :func:`pdr.slip.segment_strides` of its forward flow where measured."""
+    quality = flow["quality"].to_numpy()
+    return segment_strides(flow["t_s"].to_numpy(), np.where(quality > 0, forward_flow(flow), np.nan))
+
+
 def camera_strides(rec: Recording, config: dict) -> pd.DataFrame | None:
     """Strides of the camera leg (``t_start_s, t_end_s, foot, length_m, length_std_m, source``), None without video."""
     if rec.video_path is None:
         return None
+    method = stride_method(config)
     if rec.camera is None:
         raise InputError(f"{rec.video_path}: expected camera.toml beside the video, found none")
     cam = CameraModel.from_toml(rec.camera, what=f"{rec.path or rec.id}/camera.toml")
@@ -59,13 +83,19 @@ def camera_strides(rec: Recording, config: dict) -> pd.DataFrame | None:
         raise InputError(f"{rec.video_path}: expected {cam.width_px}x{cam.height_px} frames as camera.toml says, "
                          f"found {frames.shape[2]}x{frames.shape[1]}")
     t = rec.frames["t_s"].to_numpy() if rec.frames is not None else np.arange(len(frames)) / cam.fps
-    flow_est = CorrelationOpticalFlow.from_config({**flow_defaults(*frames.shape[1:]), **config.get("flow", {})}
-                                                  ).estimate(frames, t)
-    flow = flow_est.flow_
     subject = rec.subject
     lengths = {k: float(subject[k]) for k in ("leg_length_m", "shank_length_m", "thigh_length_m")
                if k in subject}
-    body = SlipBody.from_user(float(subject.get("height_m", DEFAULT_HEIGHT_M)), **lengths)
+    height_m = float(subject.get("height_m", DEFAULT_HEIGHT_M))
+    body = SlipBody.from_user(height_m, **lengths)
+    if method == "odometry":
+        motion = HomographyCameraMotion.from_config({"focal_px": cam.focal_px, "cx_px": cam.cx_px, "cy_px": cam.cy_px,
+                                                     **config.get("homography", {})}).estimate(frames, t).motion_
+        est = FloorOdometryStride.from_config({"shank_length_m": body.shank_length_m,
+                                               "ankle_height_m": ANKLE_HEIGHT_RATIO * height_m,
+                                               "camera_from_knee_m": cam.distance_from_knee_m, "foot": cam.side,
+                                               **config.get("odometry", {})})
+        return est.estimate(motion, cut_strides(motion)).strides_.reset_index(drop=True)
     slip_defaults = {
         "thigh_length_m": body.thigh_length_m,
         "shank_length_m": body.shank_length_m,
@@ -74,6 +104,8 @@ def camera_strides(rec: Recording, config: dict) -> pd.DataFrame | None:
         "focal_px": cam.focal_px,
         "foot": cam.side,
     }
+    flow = CorrelationOpticalFlow.from_config({**flow_defaults(*frames.shape[1:]), **config.get("flow", {})}
+                                              ).estimate(frames, t).flow_
     est = SlipOpticalFlowStride.from_config({**slip_defaults, **config.get("slip_of", {})})
     est.estimate(flow["t_s"].to_numpy(), forward_flow(flow), flow["quality"].to_numpy())
     return est.strides_.reset_index(drop=True)

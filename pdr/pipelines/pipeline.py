@@ -2,8 +2,9 @@
 
 Stages: GNSS in the local frame (``[gnss] mask_intervals_s``) -> steps (``[steps]``, ``[heading]``; stretches not walked
 dropped) -> step lengths (``--model`` or ``[step_length]``, else the body model of the recording; ``[gait_forms]``) ->
-strides (foot IMUs ``[foot]``, leg camera ``[flow]``/``[slip_of]``) -> faults (``[faults]``) -> fusion (``[fusion] method
-= "graph" | "incremental" | "ekf"`` plus that class's parameters; default the batch factor graph) -> walking bouts.
+strides (foot IMUs ``[foot]``, leg camera ``[leg_camera]``, ``[flow]`` and ``[homography]`` / ``[odometry]`` or
+``[slip_of]``) -> faults (``[faults]``) -> fusion (``[fusion] method = "graph" | "incremental" | "ekf"`` plus that
+class's parameters; default the batch factor graph) -> walking bouts.
 
 Example
 -------
@@ -33,12 +34,12 @@ from pdr.pipelines.bouts import recording_bouts
 from pdr.pipelines.faults import rejected_gnss, sensor_faults, warning_line, warning_objects, widen_steps
 from pdr.pipelines.foot import FOOT_SOURCE, foot_chain, foot_strides
 from pdr.pipelines.gait_forms import GAIT_FORMS_KEYS, per_form_step_lengths
-from pdr.pipelines.leg_camera import camera_strides
+from pdr.pipelines.leg_camera import camera_strides, stride_method
 from pdr.pipelines.not_walking import drop_not_walking, gnss_only_trajectory, interval_message, not_walking_intervals
 from pdr.pipelines.steps import DETECTORS, make_detector, steps_table
 from pdr.signals import ImuSignals
 from pdr.signals.faults import SensorFaultDetection
-from pdr.step_length import choose_model, leg_camera_length_scale
+from pdr.step_length import choose_model, leg_camera_calibration
 from pdr.step_length.body import body_model
 from pdr.step_length.io import model_from_dict, model_to_dict
 from pdr.step_length.models import MAX_STEP_M, StepLengthModel
@@ -169,7 +170,8 @@ class Pipeline(Algorithm):
     gait_forms : the ``[gait_forms]`` section (``forms`` = a forms.json path; its forms' step models replace the
         lengths of their steps) or None.
     foot : the ``[foot]`` section (shoe IMUs; built per foot, see :mod:`pdr.pipelines.foot`).
-    leg_camera : ``{"flow": [flow] section, "slip_of": [slip_of] section}`` (defaults from the camera and the subject).
+    leg_camera : ``{"leg_camera": [leg_camera], "flow": [flow], "homography": [homography], METHOD: [METHOD]}`` sections
+        (METHOD the ``[leg_camera] method``, "odometry" or "slip_of"; defaults from the camera and the subject).
     faults : :class:`pdr.signals.faults.SensorFaultDetection` or the ``[faults]`` section.
     fusion : a fusion (:class:`FactorGraphFusion`, :class:`IncrementalFusion`, :class:`EkfFusion`) or the ``[fusion]``
         section (``method = "graph" | "incremental" | "ekf"`` and its parameters).
@@ -209,8 +211,8 @@ class Pipeline(Algorithm):
     def from_config(cls, config: str | Path | dict[str, Any] | None = None, *, model_path: str | Path | None = None,
                     use_gnss: bool = True, config_dir: str | Path | None = None) -> "Pipeline":
         """The pipeline of a configuration (a TOML file, its sections as a dict, or None for the defaults) and a step
-        model file (``pdr run --model``; its leg-camera length scale, if any, goes to ``[slip_of]`` unless that
-        section sets one). A relative ``[gait_forms] forms`` path is relative to ``config_dir``
+        model file (``pdr run --model``; its leg-camera length scale, if any, goes to the ``[leg_camera] method``'s
+        section unless that section sets one, or, calibrated for the other method, is not applied, with a warning). A relative ``[gait_forms] forms`` path is relative to ``config_dir``
         (default: the configuration file's folder)."""
         base_dir = Path(config_dir) if config_dir is not None else None
         if config is None or isinstance(config, (str, Path)):
@@ -233,13 +235,19 @@ class Pipeline(Algorithm):
             for key in ("forms", "forms_file"):
                 if base_dir is not None and isinstance(forms.get(key), str) and not Path(forms[key]).is_absolute():
                     forms[key] = str(base_dir / forms[key])
-        slip_of = dict(config.get("slip_of", {}))
-        camera_scale = leg_camera_length_scale(model_path) if model_path is not None else None
-        if camera_scale is not None and "length_scale" not in slip_of:  # the configuration's own scale wins
-            slip_of["length_scale"] = camera_scale
+        method = stride_method(config)
+        camera = {key: dict(config.get(key) or {}) for key in ("leg_camera", "flow", "homography", method)}
+        calibration = leg_camera_calibration(model_path) if model_path is not None else None
+        if calibration is not None and "length_scale" not in camera[method]:  # the configuration's own scale wins
+            if calibration["method"] == method:
+                keys = ("length_scale", "length_scale_std") if method == "odometry" else ("length_scale",)
+                camera[method].update({k: calibration[k] for k in keys if k in calibration})
+            else:
+                warn(f"model file {model_path}: its leg-camera scale was calibrated for the {calibration['method']!r} "
+                     f"strides, this run's [leg_camera] method is {method!r}: the scale is not applied")
         return cls(steps=steps, heading=AttitudeStepHeading.from_config(config.get("heading")), step_length=model,
                    step_length_choice=choice, gait_forms=forms, foot=dict(config.get("foot", {})),
-                   leg_camera={"flow": dict(config.get("flow", {})), "slip_of": slip_of},
+                   leg_camera=camera,
                    faults=SensorFaultDetection.from_config(config.get("faults")), fusion=fusion, gnss=settings,
                    use_gnss=use_gnss)
 

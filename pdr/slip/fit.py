@@ -632,15 +632,17 @@ SCALE_PERSON_STD = 0.032
 SCALE_WALK_STD = 0.014
 
 
-def calibrated_length_scale(known_m, camera_m, known_std_m, walk) -> tuple[float, float]:
+def calibrated_length_scale(known_m, camera_m, known_std_m, walk, *, person_std: float = SCALE_PERSON_STD,
+                            walk_std: float = SCALE_WALK_STD) -> tuple[float, float]:
     """A user's ``length_scale`` from stretches of known length: ``(scale, std)``.
 
-    ``known_m`` (std ``known_std_m``) and ``camera_m`` (the SLIP-OF strides' metres over the same stretches, the
+    ``known_m`` (std ``known_std_m``) and ``camera_m`` (the camera strides' metres over the same stretches, the
     estimator's scale 1) per stretch, ``walk`` the walk (recording) of each. A hierarchical model: the person's scale
-    ``s ~ N(1, SCALE_PERSON_STD^2)``, each walk's camera off it by its own factor, ``N(1, SCALE_WALK_STD^2)``
-    (its floor, camera, pace), shared by the walk's stretches; so one walk moves the scale by 84% of
-    what it reads (3.2^2 / (3.2^2 + 1.4^2)), and walks of several floors and paces pin a person's own scale down. The std is
-    the person's scale's; a later walk adds its own ``SCALE_WALK_STD``.
+    ``s ~ N(1, person_std^2)``, each walk's camera off it by its own factor, ``N(1, walk_std^2)``
+    (its floor, camera, pace), shared by the walk's stretches; so with the SLIP-OF's spreads (the defaults,
+    :data:`SCALE_PERSON_STD`, :data:`SCALE_WALK_STD`) one walk moves the scale by 84% of what it reads
+    (3.2^2 / (3.2^2 + 1.4^2)), and walks of several floors and paces pin a person's own scale down. The std is
+    the person's scale's; a later walk adds its own ``walk_std``.
     """
     known_m, camera_m = np.asarray(known_m, float), np.asarray(camera_m, float)
     known_std_m, walk = np.asarray(known_std_m, float), np.asarray(walk)
@@ -652,7 +654,7 @@ def calibrated_length_scale(known_m, camera_m, known_std_m, walk) -> tuple[float
     _, index = np.unique(walk, return_inverse=True)
     known_w = np.bincount(index, known_m)
     camera_w = np.bincount(index, camera_m)
-    std_w = np.sqrt(np.bincount(index, known_std_m ** 2) + (SCALE_WALK_STD * camera_w) ** 2)
-    info = float(np.sum(camera_w ** 2 / std_w ** 2)) + 1.0 / SCALE_PERSON_STD ** 2
-    scale = (float(np.sum(camera_w * known_w / std_w ** 2)) + 1.0 / SCALE_PERSON_STD ** 2) / info
+    std_w = np.sqrt(np.bincount(index, known_std_m ** 2) + (walk_std * camera_w) ** 2)
+    info = float(np.sum(camera_w ** 2 / std_w ** 2)) + 1.0 / person_std ** 2
+    scale = (float(np.sum(camera_w * known_w / std_w ** 2)) + 1.0 / person_std ** 2) / info
     return scale, 1.0 / math.sqrt(info)

@@ -17,7 +17,7 @@ Example
 
 from pdr.step_length.body import body_model, choose_model
 from pdr.step_length.features import step_signal_features, vertical_excursion_m, with_signal_features
-from pdr.step_length.io import leg_camera_length_scale, load_model, model_from_config, save_model
+from pdr.step_length.io import leg_camera_calibration, load_model, model_from_config, save_model
 from pdr.step_length.models import (
     MODELS,
     KimStepLength,
@@ -29,5 +29,5 @@ from pdr.step_length.models import (
 
 __all__ = [
     "MODELS", "KimStepLength", "RegressionStepLength", "StepLengthModel", "WeinbergStepLength", "ZijlstraStepLength",
-    "body_model", "choose_model", "leg_camera_length_scale", "load_model", "model_from_config", "save_model", "step_signal_features", "vertical_excursion_m", "with_signal_features",
+    "body_model", "choose_model", "leg_camera_calibration", "load_model", "model_from_config", "save_model", "step_signal_features", "vertical_excursion_m", "with_signal_features",
 ]

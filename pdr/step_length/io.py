@@ -6,10 +6,11 @@ The file::
     {"pdr_model_version": 1, "model": "regression",
      "params": {"a_m": ..., "b_m_per_hz": ..., "c_m_per_m2ps4": ..., "residual_std_m": ..., "covariance": [[...]]},
      "info": {"n_steps": ..., "distance_m": ..., ...},
-     "leg_camera": {"length_scale": ..., ...}}
+     "leg_camera": {"method": "odometry", "length_scale": ..., "length_scale_std": ..., ...}}
 
-``leg_camera`` (optional, from a calibration walk filmed by a leg camera) holds the camera strides' length scale,
-which ``pdr run --model`` gives the SLIP-OF estimator (:func:`leg_camera_length_scale`).
+``leg_camera`` (optional, from a calibration walk filmed by a leg camera) holds the camera strides' length scale and
+the stride method it was calibrated for, which ``pdr run --model`` gives that method's estimator
+(:func:`leg_camera_calibration`; a file without ``method`` was written for "slip_of").
 
 Example
 -------
@@ -85,18 +86,28 @@ def _model_document(path: str | Path, what: str) -> Any:
 LEG_CAMERA_SCALE_RANGE = (2.0 / 3.0, 1.5)  # a factor 1.5 either way: beyond any body model's error, a wrong mount
 
 
-def leg_camera_length_scale(path: str | Path) -> float | None:
-    """The leg camera's per-user length scale of a model file (its ``leg_camera`` object), None when it has none."""
+def leg_camera_calibration(path: str | Path) -> dict[str, Any] | None:
+    """The leg camera's per-user calibration of a model file (its ``leg_camera`` object): ``method``,
+    ``length_scale`` and, if stored, ``length_scale_std``; None when it has none."""
     what = f"model file {path}"
     doc = _model_document(path, what)
     section = doc.get("leg_camera") if isinstance(doc, dict) else None
     if section is None:
         return None
-    scale = section.get("length_scale") if isinstance(section, dict) else None
+    section = section if isinstance(section, dict) else {}
+    scale, std = section.get("length_scale"), section.get("length_scale_std")
+    method = section.get("method", "slip_of")
     lo, hi = LEG_CAMERA_SCALE_RANGE
     if isinstance(scale, bool) or not isinstance(scale, (int, float)) or not lo <= scale <= hi:
         raise InputError(f"{what}: expected leg_camera.length_scale a number in [{lo:.3g}, {hi:.3g}], found {scale!r}")
-    return float(scale)
+    if std is not None and (isinstance(std, bool) or not isinstance(std, (int, float)) or not 0 <= std < 1):
+        raise InputError(f"{what}: expected leg_camera.length_scale_std a number in [0, 1), found {std!r}")
+    if method not in ("odometry", "slip_of"):
+        raise InputError(f"{what}: expected leg_camera.method 'odometry' or 'slip_of', found {method!r}")
+    out = {"method": method, "length_scale": float(scale)}
+    if std is not None:
+        out["length_scale_std"] = float(std)
+    return out
 
 
 def load_model(path: str | Path) -> StepLengthModel:

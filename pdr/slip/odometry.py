@@ -1,0 +1,183 @@
+"""Leg-camera stride length from the camera's floor odometry, scaled by the leg's stance geometry.
+
+The frames give the camera's motion over the floor in units of its own height, and the ratio of its heights from
+frame to frame (:class:`pdr.flow.HomographyCameraMotion`); metres come from the leg: in mid-stance (Perry & Burnfield
+2010: 12-31% of the gait cycle, after the loading response and before the heel rises) the foot is flat and the
+shank pivots about the ankle, so the camera, ``camera_from_knee_m`` below the knee on the shank, is
+``a + (S - a - L) cos(theta)`` over the floor (``S`` the knee's height, ``a`` the ankle's, ``theta`` the shank's
+tilt, which the floor's normal gives). Each stride is the camera's displacement from one mid-stance to the next.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+
+from pdr.base import Algorithm
+from pdr.errors import InputError, warn
+from pdr.schema import STRIDE_COLUMNS
+from pdr.slip.fit import SEGMENT_COLUMNS
+
+MIDSTANCE_PHASE = (0.12, 0.31)  # Perry & Burnfield 2010: mid-stance, fraction of the gait cycle from heel strike
+# Per-user scale of the odometry strides: the spread of a person's mean stride error about none (their knee and mount
+# as a user measures them: 4.2%) and of a walk's mean around its person's (0.8%), read on the tuning group of
+# ``python -m benchmarks leg_camera`` (rows "people's mean stride error, RMS" and "SD within a person").
+ODOMETRY_PERSON_STD = 0.042
+ODOMETRY_WALK_STD = 0.008
+
+
+class FloorOdometryStride(Algorithm):
+    """Stride length of the camera leg: the camera's floor odometry from one mid-stance to the next, in metres.
+
+    Parameters
+    ----------
+    shank_length_m : the knee's height over the floor (the SLIP's shank: knee to ankle plus the ankle's height).
+    ankle_height_m : the ankle joint's height over the floor.
+    camera_from_knee_m : mount distance of the camera below the knee along the shank.
+    foot : "left" or "right", the leg carrying the camera.
+    midstance_phase : (start, end) of the gait cycle's mid-stance, fractions from heel strike, where the camera's
+        height is the leg's (Perry & Burnfield 2010: 0.12-0.31).
+    length_scale : per-user factor on the strides (1: none; ``pdr calibrate`` fits it on a walk of known length).
+    length_scale_std : the calibrated scale's std; None: uncalibrated, the person's spread ``person_rel_std``.
+    person_rel_std : relative std of an uncalibrated person's scale (their knee and mount as measured).
+    walk_rel_std : relative std of one stride's odometry (the height chain, the measured motion).
+    max_bridged_fraction : a stride whose frame pairs were not measured over more than this fraction of its
+        duration gives no stride (their motion is bridged from the neighbouring pairs' rate).
+
+    Attributes
+    ----------
+    strides_ : DataFrame ``t_start_s, t_end_s, foot, length_m, length_std_m, source`` (source "leg_camera").
+    anchors_ : one row per stride cut: ``t_s`` (mid-stance), ``height_m`` (the leg's camera height there),
+        ``tilt_rad``, ``log_offset`` (the measured height chain's offset to metres there).
+
+    Notes
+    -----
+    Between two mid-stances the height chain (the cumulated log height ratios) drifts by the measurement's small
+    bias; the two anchors' offsets are joined linearly in time. Strides are cut at the flow's heel strikes
+    (:func:`pdr.slip.segment_strides`), or at the ``segments`` given.
+
+    Example
+    -------
+    >>> est = FloorOdometryStride(shank_length_m=0.5, ankle_height_m=0.07, camera_from_knee_m=0.25)
+    >>> est.estimate(motion, segments).strides_
+    """
+
+    def __init__(self, *, shank_length_m: float = 0.5, ankle_height_m: float = 0.07, camera_from_knee_m: float = 0.25,
+                 foot: str = "left", midstance_phase: tuple[float, float] = MIDSTANCE_PHASE, length_scale: float = 1.0,
+                 length_scale_std: float | None = None, person_rel_std: float = ODOMETRY_PERSON_STD,
+                 walk_rel_std: float = ODOMETRY_WALK_STD, max_bridged_fraction: float = 0.15):
+        self.shank_length_m = shank_length_m
+        self.ankle_height_m = ankle_height_m
+        self.camera_from_knee_m = camera_from_knee_m
+        self.foot = foot
+        self.midstance_phase = midstance_phase
+        self.length_scale = length_scale
+        self.length_scale_std = length_scale_std
+        self.person_rel_std = person_rel_std
+        self.walk_rel_std = walk_rel_std
+        self.max_bridged_fraction = max_bridged_fraction
+
+    def _check(self) -> None:
+        if self.foot not in ("left", "right"):
+            raise InputError(f"FloorOdometryStride: expected foot 'left' or 'right', found {self.foot!r}")
+        for name in ("shank_length_m", "ankle_height_m", "camera_from_knee_m", "length_scale"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v > 0):
+                raise InputError(f"FloorOdometryStride: expected a positive {name}, found {v!r}")
+        lo, hi = self.midstance_phase
+        if not 0.0 <= lo < hi <= 0.6:
+            raise InputError(f"FloorOdometryStride: expected a midstance_phase 0 <= start < end <= 0.6, found {self.midstance_phase!r}")
+
+    def camera_height_m(self, tilt_rad: np.ndarray) -> np.ndarray:
+        """The camera's height over the floor in mid-stance (foot flat, the shank ``tilt_rad`` from the vertical)."""
+        lever = self.shank_length_m - self.ankle_height_m - self.camera_from_knee_m
+        return self.ankle_height_m + lever * np.cos(tilt_rad)
+
+    def estimate(self, motion: pd.DataFrame, segments: pd.DataFrame) -> "FloorOdometryStride":
+        """Strides from the camera's ``motion`` (:attr:`pdr.flow.HomographyCameraMotion.motion_`) cut at ``segments``
+        (``t_start_s, t_toe_off_s, t_end_s``, heel strike to heel strike of the camera leg)."""
+        self._check()
+        need = ["t_s", "dt_s", "height_log_ratio", "floor_x_per_height", "floor_y_per_height", "tilt_rad"]
+        missing = [c for c in need if c not in motion.columns] + [c for c in SEGMENT_COLUMNS if c not in segments.columns]
+        if missing:
+            raise InputError(f"FloorOdometryStride: expected motion columns {', '.join(need)} and segment columns "
+                             f"{', '.join(SEGMENT_COLUMNS)}, missing {', '.join(missing)}")
+        self.strides_ = pd.DataFrame({c: pd.Series(dtype=object if c in ("foot", "source") else float) for c in STRIDE_COLUMNS})
+        self.anchors_ = pd.DataFrame({c: np.zeros(0) for c in ("t_s", "height_m", "tilt_rad", "log_offset")})
+        if self.camera_from_knee_m >= self.shank_length_m - self.ankle_height_m:
+            warn(f"FloorOdometryStride: camera {self.camera_from_knee_m:g} m below the knee, the shank (knee to ankle) "
+                 f"is {self.shank_length_m - self.ankle_height_m:g} m: the mount is off the shank; no stride estimated")
+            return self
+        t_pair = motion["t_s"].to_numpy(float)
+        dt = motion["dt_s"].to_numpy(float)
+        log_ratio = motion["height_log_ratio"].to_numpy(float)
+        floor_xy = motion[["floor_x_per_height", "floor_y_per_height"]].to_numpy(float)
+        tilt = motion["tilt_rad"].to_numpy(float)
+        measured = np.isfinite(log_ratio) & np.isfinite(floor_xy).all(axis=1)
+        has_tilt = measured & np.isfinite(tilt)
+        if len(segments) < 2 or measured.sum() < 10 or has_tilt.sum() < 2:
+            warn(f"FloorOdometryStride: {len(segments)} strides cut, {int(measured.sum())} of {len(t_pair)} frame pairs "
+                 "measured: no stride estimated")
+            return self
+        rate_hz = 1.0 / float(np.median(dt))
+        cadence_hz = 2.0 / float(np.median(segments["t_end_s"] - segments["t_start_s"]))  # steps per second
+        if rate_hz < 2.0 * cadence_hz:
+            warn(f"FloorOdometryStride: frames at {rate_hz:.1f} Hz are below twice the cadence ({cadence_hz:.2f} "
+                 "steps/s): the swing is not sampled; no stride estimated")
+            return self
+        # the walking direction on the floor: the principal axis of the camera's displacements, signed forward
+        _, _, vt = np.linalg.svd(floor_xy[measured], full_matrices=False)
+        forward = floor_xy @ vt[0]
+        if np.nansum(forward) < 0:
+            forward = -forward
+        rate = forward / dt  # heights per second; unmeasured pairs take their neighbours' rate and log-height rate
+        rate = np.interp(t_pair, t_pair[measured], rate[measured])
+        log_rate = np.interp(t_pair, t_pair[measured], log_ratio[measured] / dt[measured])
+        t_frame = np.concatenate([[t_pair[0] - 0.5 * dt[0]], t_pair + 0.5 * dt])
+        log_height = np.concatenate([[0.0], np.cumsum(log_rate * dt)])  # at the frames, up to an offset
+        tilt_frame = np.interp(t_frame, t_pair[has_tilt], tilt[has_tilt])
+        lo, hi = self.midstance_phase
+        anchors = []
+        for s in segments.itertuples(index=False):
+            period = s.t_end_s - s.t_start_s
+            m = (t_frame >= s.t_start_s + lo * period) & (t_frame <= s.t_start_s + hi * period)
+            if m.sum() < 2:
+                anchors.append(None)
+                continue
+            h = self.camera_height_m(tilt_frame[m])
+            t_mid = s.t_start_s + 0.5 * (lo + hi) * period
+            offset = float(np.median(np.log(h) - log_height[m]))
+            anchors.append((t_mid, float(np.median(h)), float(np.median(tilt_frame[m])), offset))
+        self.anchors_ = pd.DataFrame([a for a in anchors if a is not None], columns=list(self.anchors_.columns))
+        rel_std = math.hypot(self.person_rel_std if self.length_scale_std is None else self.length_scale_std,
+                             self.walk_rel_std)
+        rows, n_bridged = [], 0
+        starts = segments["t_start_s"].to_numpy(float)
+        for k, s in enumerate(segments.itertuples(index=False)):
+            # a stride runs from its mid-stance to the next one's: the last stride, or one whose successor was left
+            # out, has no second anchor, and one anchor alone lets the height chain drift (tuning people: 3.4 -> 5.5%)
+            if k + 1 >= len(anchors) or anchors[k] is None or anchors[k + 1] is None:
+                continue
+            if abs(starts[k + 1] - s.t_end_s) > 0.1 * (s.t_end_s - s.t_start_s):
+                continue
+            (ta, _, _, oa), (tb, _, _, ob) = anchors[k], anchors[k + 1]
+            p = (t_pair >= ta) & (t_pair < tb)
+            bridged = float(np.sum(dt[p & ~measured]) / max(tb - ta, 1e-9))
+            if bridged > self.max_bridged_fraction:
+                n_bridged += 1
+                continue
+            w = np.clip((t_frame[:-1] - ta) / (tb - ta), 0.0, 1.0)  # each pair's first frame, between the anchors
+            height = np.exp(log_height[:-1] + oa + w * (ob - oa))
+            length = float(np.sum(rate[p] * dt[p] * height[p])) * self.length_scale
+            if not length > 0:
+                continue
+            std = length * math.hypot(rel_std, 0.5 * bridged)
+            rows.append((s.t_start_s, s.t_end_s, self.foot, length, std, "leg_camera"))
+        if n_bridged:
+            warn(f"FloorOdometryStride: {n_bridged} strides had more than {self.max_bridged_fraction:.0%} of their frame "
+                 "pairs unmeasured (no texture, blur, a lost view); no stride there")
+        if rows:
+            self.strides_ = pd.DataFrame(rows, columns=STRIDE_COLUMNS)
+        return self
