@@ -167,3 +167,26 @@ def test_odometry_strides_hold_across_frame_rates_and_the_camera_leg():
         assert np.abs(errors).max() < 0.04, (name, errors)
     assert abs(np.mean(out["60"]) - np.mean(out["100"])) < 0.02
     assert abs(np.mean(out["right"]) - np.mean(out["100"])) < 0.02
+
+
+def test_a_texture_less_stretch_of_floor_loses_its_strides_only(tmp_path):
+    """Bad input: a stretch of blank floor (a painted line, a wet patch) in the middle of the walk: the strides over it
+    are not given, with a warning, and the others stay right."""
+    from pdr.pipelines.leg_camera import cut_strides
+    from pdr.sim.gait import WalkKinematics
+
+    gravel = load_texture("gravel")
+    floor = np.tile(gravel, (1, 4))  # 2048 px = 4.1 m of floor along the walk, then mirrored
+    floor[:, 1100:1500] = int(gravel.mean())  # 0.8 m without texture, about 2.2-3.0 m into the walk
+    kin = WalkKinematics.steady(speed_mps=1.3, duration_s=7.0, seed=4)
+    frames, table = render_leg_camera(kin, CAM, 0.5, 7.5, floor, seed=6)
+    motion = HomographyCameraMotion(focal_px=CAM.focal_px, cx_px=CAM.cx_px, cy_px=CAM.cy_px).estimate(frames, table.t_s).motion_
+    body = kin.body
+    with warns(r"no stride cut over [\d.]+-[\d.]+ s, where frame pairs are unmeasured"):
+        est = FloorOdometryStride(shank_length_m=body.shank_m + body.ankle_height_m, ankle_height_m=body.ankle_height_m,
+                                  camera_from_knee_m=CAM.distance_from_knee_m).estimate(motion, cut_strides(motion))
+    true = kin.true_strides()
+    true = true[true.foot == "left"]
+    k = np.abs(true.t_start_s.to_numpy()[None, :] - est.strides_.t_start_s.to_numpy()[:, None]).argmin(axis=1)
+    errors = est.strides_.length_m.to_numpy() / true.length_m.to_numpy()[k] - 1
+    assert 1 <= len(errors) <= len(true) - 3 and np.abs(errors).max() < 0.04

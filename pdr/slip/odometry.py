@@ -95,6 +95,19 @@ class FloorOdometryStride(Algorithm):
         lever = self.shank_length_m - self.ankle_height_m - self.camera_from_knee_m
         return self.ankle_height_m + lever * np.cos(tilt_rad)
 
+    @staticmethod
+    def _warn_lost_stretches(t_pair: np.ndarray, measured: np.ndarray, segments: pd.DataFrame) -> None:
+        """One warning naming the gaps between the strides cut where frame pairs were not measured: the flow there
+        could not be cut into strides (no texture, blur, a lost view)."""
+        ends, starts = segments["t_end_s"].to_numpy(float)[:-1], segments["t_start_s"].to_numpy(float)[1:]
+        periods = (segments["t_end_s"] - segments["t_start_s"]).to_numpy(float)[:-1]
+        lost = [(a, b) for a, b, p in zip(ends, starts, periods)
+                if b - a > 0.1 * p and not measured[(t_pair > a) & (t_pair < b)].all()]
+        if lost:
+            where = ", ".join(f"{a:.2f}-{b:.2f} s" for a, b in lost)
+            warn(f"FloorOdometryStride: no stride cut over {where}, where frame pairs are unmeasured (no texture, "
+                 "blur, a lost view)")
+
     def estimate(self, motion: pd.DataFrame, segments: pd.DataFrame) -> "FloorOdometryStride":
         """Strides from the camera's ``motion`` (:attr:`pdr.flow.HomographyCameraMotion.motion_`) cut at ``segments``
         (``t_start_s, t_toe_off_s, t_end_s``, heel strike to heel strike of the camera leg)."""
@@ -127,6 +140,7 @@ class FloorOdometryStride(Algorithm):
             warn(f"FloorOdometryStride: frames at {rate_hz:.1f} Hz are below twice the cadence ({cadence_hz:.2f} "
                  "steps/s): the swing is not sampled; no stride estimated")
             return self
+        self._warn_lost_stretches(t_pair, measured, segments)
         # the walking direction on the floor: the principal axis of the camera's displacements, signed forward
         _, _, vt = np.linalg.svd(floor_xy[measured], full_matrices=False)
         forward = floor_xy @ vt[0]
