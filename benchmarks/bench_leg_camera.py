@@ -2,20 +2,23 @@
 
 The walks are the simulator's ``pdr.sim.gait.WalkKinematics`` (Fourier hip/knee/ankle curves, rocker-sole stance feet
 without slip, double support, per-step variability; written by another work stream) rendered by
-``pdr.sim.camera`` - a richer model than the SLIP the estimator fits.
+``pdr.sim.camera`` - a richer model than the SLIP the SLIP-OF fits, and a walk the floor odometry knows nothing of.
 
-Stride length is measured on simulated people: a tuning group (on which the estimator's swing-clearance ratio, the
-flow's pre-blur, the failure threshold and the sigma floor were chosen) and a test group of other people, each
-person with a drawn leg proportion (Bogin & Varela-Silva 2010), knee height within the leg (``KNEE_SCALE_SD``) and
-step-length law (``GaitUser``; healthy and older cohorts), at three speeds, on three real floors (gravel, brick,
-grass), with two camera set-ups. The estimator is given what a user knows: the height and the leg length
-tape-measured (+-1 cm), the camera's mount distance below the knee measured (+-0.5 cm), the camera intrinsics; the
-segment lengths come from Winter's ratios (``SlipBody.from_user``); each group is read again with the shank (knee
-to ankle) tape-measured too, and once with the walks' true body and mount (what no user knows: the bound of
-better body measurements). Each group also reports its strides read from the measured flow with the walks' true camera geometry: the flow's own error, apart from the model's, and its walks after
-a per-user calibration (the scale ``pdr calibrate`` stores, ``pdr.slip.calibrated_length_scale``) on one walk of each
-person, a known distance over that walk's strides: the scale is fitted there once and the person's other walks are
-scored, never the calibration walk.
+Stride length is measured on simulated people with both stride methods, the floor odometry (the default:
+``pdr.flow.HomographyCameraMotion`` + ``pdr.slip.FloorOdometryStride``) and the SLIP-OF (``[leg_camera] method =
+"slip_of"``): a tuning group (on which the odometry's sigma spreads and the SLIP-OF's swing-clearance ratio, flow
+pre-blur, failure threshold and sigma floor were chosen) and a test group of other people, each person with a drawn
+leg proportion (Bogin & Varela-Silva 2010), knee height within the leg (``KNEE_SCALE_SD``) and step-length law
+(``GaitUser``; healthy and older cohorts), at three speeds, on three real floors (gravel, brick, grass), with two
+camera set-ups. The estimators are given what a user knows: the height and the leg length tape-measured (+-1 cm),
+the camera's mount distance below the knee measured (+-0.5 cm), the camera intrinsics; the segment lengths come from
+Winter's ratios (``SlipBody.from_user``); each group is read again with the walks' true body and mount (what no user
+knows: the bound of better body measurements), the odometry also with the shank (knee to ankle) tape-measured.
+The SLIP-OF's rows also give its strides read from the measured flow with the walks' true camera geometry (the
+flow's own error, apart from the model's). Both methods are scored after a per-user calibration (the scale ``pdr
+calibrate`` stores, ``pdr.slip.calibrated_length_scale`` with the method's spreads) on one walk of each person, a
+known distance over that walk's strides: the scale is fitted there once and the person's other walks are scored,
+never the calibration walk.
 """
 
 from __future__ import annotations
