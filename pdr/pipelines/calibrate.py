@@ -30,7 +30,7 @@ from pdr.calibration.segments import landmark_distances, trajectory_distances
 from pdr.config import load_config
 from pdr.errors import InputError, warn
 from pdr.io.recording import load_recording, read_csv
-from pdr.pipelines.leg_camera import camera_strides, stride_method
+from pdr.pipelines.leg_camera import CALIBRATED_PARAMS, camera_sections, camera_strides
 from pdr.pipelines.pipeline import gnss_local, gnss_settings
 from pdr.pipelines.steps import detect_steps
 from pdr.slip import calibrated_length_scale
@@ -110,8 +110,8 @@ def leg_camera_scale(strides_list: list[pd.DataFrame | None], steps_list: list[p
         return None
     person_std, walk_std = SCALE_SPREADS[method]
     scale, scale_std = calibrated_length_scale(known, camera, known_std, walk, person_std=person_std, walk_std=walk_std)
-    return {"method": method, "length_scale": scale, "length_scale_std": scale_std, "measured_ratio": ratio, "n_walks": len(set(walk)),
-            "n_segments": len(known), "n_strides": n_strides, "distance_m": round(sum(known), 2)}
+    return {"method": method, "length_scale": scale, "length_scale_std": scale_std, "measured_ratio": ratio,
+            "n_walks": len(set(walk)), "n_segments": len(known), "n_strides": n_strides, "distance_m": round(sum(known), 2)}
 
 
 def _why_no_segment(steps_list, gnss_list, akf) -> str:
@@ -182,9 +182,8 @@ def calibrate_recordings(recs: list[Path], out: Path, config_path=None, *, dista
         raise InputError(f"calibrate: expected GNSS (gnss.csv) or a known distance (--distance-m, --landmarks, "
                          f"--trajectory) for every recording, found neither for {', '.join(without)}")
     model, choice = choose_model(config, recordings[0].subject, recordings[0].placement)
-    method = stride_method(config)
-    camera_config = {key: dict(config.get(key) or {}) for key in ("leg_camera", "flow", "homography", method)}
-    camera_config[method] = {k: v for k, v in camera_config[method].items() if k not in ("length_scale", "length_scale_std")}
+    method, camera_config = camera_sections(config)
+    camera_config[method] = {k: v for k, v in camera_config[method].items() if k not in CALIBRATED_PARAMS[method]}
     steps_list, gnss_list, subjects, strides_list = [], [], [], []
     for rec, (kind, _) in zip(recordings, sources):
         strides_list.append(camera_strides(rec, camera_config))

@@ -22,6 +22,9 @@ from pdr.slip.model import ANKLE_HEIGHT_RATIO, SlipBody
 
 DEFAULT_HEIGHT_M = 1.75  # a subject without a height: an adult of average height
 STRIDE_METHODS = ("odometry", "slip_of")  # [leg_camera] method; its parameters are the section of that name
+# each method's parameters that `pdr calibrate` fits and `pdr run --model` gives it (the SLIP-OF's sigma has no
+# term for the scale's own uncertainty)
+CALIBRATED_PARAMS = {"odometry": ("length_scale", "length_scale_std"), "slip_of": ("length_scale",)}
 
 
 def stride_method(config: dict) -> str:
@@ -33,6 +36,13 @@ def stride_method(config: dict) -> str:
         raise InputError(f"configuration [leg_camera]: expected only method = {' or '.join(map(repr, STRIDE_METHODS))}, "
                          f"found {section!r}")
     return method
+
+
+def camera_sections(config: dict) -> tuple[str, dict]:
+    """The stride method and the leg camera's sections of a configuration (``[leg_camera]``, ``[flow]``,
+    ``[homography]`` and the method's), as :func:`camera_strides` takes them."""
+    method = stride_method(config)
+    return method, {key: dict(config.get(key) or {}) for key in ("leg_camera", "flow", "homography", method)}
 
 
 def forward_flow(flow: pd.DataFrame) -> np.ndarray:

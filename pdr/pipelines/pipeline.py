@@ -34,7 +34,7 @@ from pdr.pipelines.bouts import recording_bouts
 from pdr.pipelines.faults import rejected_gnss, sensor_faults, warning_line, warning_objects, widen_steps
 from pdr.pipelines.foot import FOOT_SOURCE, foot_chain, foot_strides
 from pdr.pipelines.gait_forms import GAIT_FORMS_KEYS, per_form_step_lengths
-from pdr.pipelines.leg_camera import camera_strides, stride_method
+from pdr.pipelines.leg_camera import CALIBRATED_PARAMS, camera_sections, camera_strides
 from pdr.pipelines.not_walking import drop_not_walking, gnss_only_trajectory, interval_message, not_walking_intervals
 from pdr.pipelines.steps import DETECTORS, make_detector, steps_table
 from pdr.signals import ImuSignals
@@ -212,8 +212,9 @@ class Pipeline(Algorithm):
                     use_gnss: bool = True, config_dir: str | Path | None = None) -> "Pipeline":
         """The pipeline of a configuration (a TOML file, its sections as a dict, or None for the defaults) and a step
         model file (``pdr run --model``; its leg-camera length scale, if any, goes to the ``[leg_camera] method``'s
-        section unless that section sets one, or, calibrated for the other method, is not applied, with a warning). A relative ``[gait_forms] forms`` path is relative to ``config_dir``
-        (default: the configuration file's folder)."""
+        section unless that section sets one, or, calibrated for the other method, is not applied, with a warning).
+        A relative ``[gait_forms] forms`` path is relative to ``config_dir`` (default: the configuration file's
+        folder)."""
         base_dir = Path(config_dir) if config_dir is not None else None
         if config is None or isinstance(config, (str, Path)):
             base_dir = Path(config).parent if config is not None and base_dir is None else base_dir
@@ -235,13 +236,11 @@ class Pipeline(Algorithm):
             for key in ("forms", "forms_file"):
                 if base_dir is not None and isinstance(forms.get(key), str) and not Path(forms[key]).is_absolute():
                     forms[key] = str(base_dir / forms[key])
-        method = stride_method(config)
-        camera = {key: dict(config.get(key) or {}) for key in ("leg_camera", "flow", "homography", method)}
+        method, camera = camera_sections(config)
         calibration = leg_camera_calibration(model_path) if model_path is not None else None
         if calibration is not None and "length_scale" not in camera[method]:  # the configuration's own scale wins
             if calibration["method"] == method:
-                keys = ("length_scale", "length_scale_std") if method == "odometry" else ("length_scale",)
-                camera[method].update({k: calibration[k] for k in keys if k in calibration})
+                camera[method].update({k: calibration[k] for k in CALIBRATED_PARAMS[method] if k in calibration})
             else:
                 warn(f"model file {model_path}: its leg-camera scale was calibrated for the {calibration['method']!r} "
                      f"strides, this run's [leg_camera] method is {method!r}: the scale is not applied")

@@ -92,6 +92,17 @@ def segment_strides(t_s: np.ndarray, flow_pxps: np.ndarray, *, high_fraction: fl
     return pd.DataFrame(rows, columns=SEGMENT_COLUMNS) if rows else empty
 
 
+def swing_unsampled(who: str, what: str, rate_hz: float, segments: pd.DataFrame) -> bool:
+    """True, with a warning from ``who``, when ``what`` (the flow, the frames) at ``rate_hz`` is below twice the
+    cadence of the strides cut (``segments``): the swing is not sampled (Nyquist) and no stride can be read."""
+    cadence_hz = 2.0 / float(np.median(segments["t_end_s"] - segments["t_start_s"]))  # steps per second
+    if rate_hz >= 2.0 * cadence_hz:
+        return False
+    warn(f"{who}: {what} at {rate_hz:.1f} Hz, below twice the cadence ({cadence_hz:.2f} steps/s): the swing is not "
+         "sampled; no stride estimated")
+    return True
+
+
 def _burst_start(t_s: np.ndarray, flow: np.ndarray, low_fraction: float = 0.12) -> float:
     """Time where the swing burst of one stride of flow starts, by the rule of :func:`segment_strides`."""
     ref = float(np.percentile(flow, 95))
@@ -337,10 +348,7 @@ class SlipOpticalFlowStride(Algorithm):
         rate_hz = 1.0 / float(np.median(np.diff(t)))
         # one flow sample per frame pair: their spacing is the frame interval
         self.frame_interval_s_ = 1.0 / rate_hz if self.frame_interval_s is None else self.frame_interval_s
-        cadence_hz = 2.0 / float(np.median(segs.t_end_s - segs.t_start_s))  # steps per second
-        if rate_hz < 2.0 * cadence_hz:
-            warn(f"SlipOpticalFlowStride: flow at {rate_hz:.1f} Hz is below twice the cadence "
-                 f"({cadence_hz:.2f} steps/s): the swing is not sampled; no stride estimated")
+        if swing_unsampled("SlipOpticalFlowStride", "flow", rate_hz, segs):
             return self
         fnan = np.where(q > 0, f, 0.0)
         ok = q > 0

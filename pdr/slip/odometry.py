@@ -18,7 +18,7 @@ import pandas as pd
 from pdr.base import Algorithm
 from pdr.errors import InputError, warn
 from pdr.schema import STRIDE_COLUMNS
-from pdr.slip.fit import SEGMENT_COLUMNS
+from pdr.slip.fit import SEGMENT_COLUMNS, swing_unsampled
 
 MIDSTANCE_PHASE = (0.12, 0.31)  # Perry & Burnfield 2010: mid-stance, fraction of the gait cycle from heel strike
 # Per-user scale of the odometry strides: the spread of a person's mean stride error about none (their knee and mount
@@ -55,8 +55,8 @@ class FloorOdometryStride(Algorithm):
     Notes
     -----
     Between two mid-stances the height chain (the cumulated log height ratios) drifts by the measurement's small
-    bias; the two anchors' offsets are joined linearly in time. Strides are cut at the flow's heel strikes
-    (:func:`pdr.slip.segment_strides`), or at the ``segments`` given.
+    bias; the two anchors' offsets are joined linearly in time. The strides are the ``segments`` given, heel strike
+    to heel strike (:func:`pdr.pipelines.leg_camera.cut_strides` cuts them from the homographies' own flow).
 
     Example
     -------
@@ -134,11 +134,7 @@ class FloorOdometryStride(Algorithm):
             warn(f"FloorOdometryStride: {len(segments)} strides cut, {int(measured.sum())} of {len(t_pair)} frame pairs "
                  "measured: no stride estimated")
             return self
-        rate_hz = 1.0 / float(np.median(dt))
-        cadence_hz = 2.0 / float(np.median(segments["t_end_s"] - segments["t_start_s"]))  # steps per second
-        if rate_hz < 2.0 * cadence_hz:
-            warn(f"FloorOdometryStride: frames at {rate_hz:.1f} Hz are below twice the cadence ({cadence_hz:.2f} "
-                 "steps/s): the swing is not sampled; no stride estimated")
+        if swing_unsampled("FloorOdometryStride", "frames", 1.0 / float(np.median(dt)), segments):
             return self
         self._warn_lost_stretches(t_pair, measured, segments)
         # the walking direction on the floor: the principal axis of the camera's displacements, signed forward
