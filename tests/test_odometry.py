@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import math
 
+import cv2
 import numpy as np
 import pandas as pd
 import pytest
@@ -43,19 +44,20 @@ def _motion(pose, t_end=0.5):
     return HomographyCameraMotion(focal_px=CAM.focal_px, cx_px=CAM.cx_px, cy_px=CAM.cy_px).estimate(frames, table.t_s).motion_
 
 
-@pytest.mark.parametrize("tilt_deg, ratio_rtol", [(0.0, 0.1), (20.0, 0.3)])
-def test_homography_reads_the_height_ratio_the_floor_displacement_and_the_tilt(tilt_deg, ratio_rtol):
+@pytest.mark.parametrize("tilt_deg", [0.0, 20.0])
+def test_homography_reads_the_height_ratio_the_floor_displacement_and_the_tilt(tilt_deg):
     # rising 0.1 m/s while gliding at 1 m/s, the shank tilted: the floor's displacement and the tilt are read to a few
-    # percent and a degree; the height's change, the motion's smallest part along the floor normal, less well where
-    # the view is oblique (a systematic 24% here at 20 degrees: see the README's Known limits)
+    # percent and a degree; the height's change, the motion's smallest part (1 mm a frame against 10 mm along the
+    # floor), to a third: +26% and -33% here, an offset of under 0.001 a frame pair, which the odometry's two
+    # anchors take out (README, Known limits)
     tilt = math.radians(tilt_deg)
     pose = Pose(1.0, lambda t: 0.55 + 0.1 * t, lambda t: np.full_like(t, tilt))
     m = _motion(pose)
     assert m.height_log_ratio.notna().all()
     height = lambda t: pose.z(t) - 0.25 * math.cos(tilt)  # noqa: E731 - the camera over the floor
     t0, t1 = m.t_s - 0.5 * m.dt_s, m.t_s + 0.5 * m.dt_s
-    np.testing.assert_allclose(m.height_log_ratio.sum(), math.log(height(t1.iloc[-1]) / height(t0.iloc[0])),
-                               rtol=ratio_rtol)
+    np.testing.assert_allclose(m.height_log_ratio.sum(), math.log(height(t1.iloc[-1]) / height(t0.iloc[0])), rtol=0.35)
+    assert np.abs(m.height_log_ratio - np.log(height(t1) / height(t0))).max() < 0.003
     # the camera moved 1 m/s x dt over the floor along the image x axis: per height of the first frame
     forward = m.floor_x_per_height * height(t0)
     np.testing.assert_allclose(np.median(forward / m.dt_s), 1.0, rtol=0.03)
@@ -73,9 +75,10 @@ def test_homography_on_a_blank_floor_measures_nothing_and_bad_input_is_an_error(
         HomographyCameraMotion(focal_px=120.0, cx_px=79.5, cy_px=59.5).estimate(frames, [0, 0.01, 0.01, 0.02, 0.03])
 
 
-def _synthetic_walk(lever_m=0.2, ankle_m=0.07, period_s=1.1, n_strides=5, rate_hz=100.0):
-    """A camera motion table of a walk with a known stride: mid-stance heights from the leg, a higher swing."""
-    t = np.arange(0.0, n_strides * period_s + 1e-9, 1.0 / rate_hz)
+def _synthetic_walk(lever_m=0.2, ankle_m=0.07, period_s=1.1, n_strides=5, rate_hz=100.0, filmed_after_s=0.0):
+    """A camera motion table of a walk with a known stride: mid-stance heights from the leg, a higher swing; the
+    frames go on ``filmed_after_s`` after the last stride's heel strike (the walk goes on)."""
+    t = np.arange(0.0, n_strides * period_s + filmed_after_s + 1e-9, 1.0 / rate_hz)
     phase = (t % period_s) / period_s
     tilt = np.radians(25.0 * np.sin(2 * np.pi * phase))
     swing = np.clip((phase - 0.6) / 0.4, 0, 1)
@@ -85,7 +88,8 @@ def _synthetic_walk(lever_m=0.2, ankle_m=0.07, period_s=1.1, n_strides=5, rate_h
     dt = np.diff(t)
     motion = pd.DataFrame({"t_s": tm, "dt_s": dt, "height_log_ratio": np.log(h[1:] / h[:-1]),
                            "floor_x_per_height": np.interp(tm, t, v) * dt / h[:-1], "floor_y_per_height": 0.0 * dt,
-                           "tilt_rad": np.interp(tm, t, tilt), "quality": 1.0})
+                           "tilt_rad": np.interp(tm, t, np.abs(tilt)), "lean_x": -np.sin(np.interp(tm, t, tilt)),
+                           "lean_y": 0.0 * dt, "quality": 1.0})
     starts = np.arange(n_strides) * period_s
     segments = pd.DataFrame({"t_start_s": starts, "t_toe_off_s": starts + 0.6 * period_s, "t_end_s": starts + period_s})
     return motion, segments, 1.3 * period_s
@@ -95,8 +99,19 @@ def test_odometry_stride_is_the_displacement_between_mid_stances_in_the_leg_s_me
     motion, segments, stride = _synthetic_walk()
     est = FloorOdometryStride(shank_length_m=0.52, ankle_height_m=0.07, camera_from_knee_m=0.25).estimate(motion, segments)
     s = est.strides_
-    assert len(s) == len(segments) - 1  # the last stride has no next mid-stance
+    assert len(s) == len(segments) - 1  # the last stride's closing mid-stance is past the last frame
     np.testing.assert_allclose(s.length_m, stride, rtol=0.005)
+    # filmed on for half a stride: the last stride ends at the mid-stance after its own closing heel strike
+    motion_on, _, _ = _synthetic_walk(filmed_after_s=0.55)
+    on = FloorOdometryStride(shank_length_m=0.52, ankle_height_m=0.07, camera_from_knee_m=0.25).estimate(motion_on, segments)
+    assert len(on.strides_) == len(segments)
+    np.testing.assert_allclose(on.strides_.length_m, stride, rtol=0.005)
+    # the shank leaning 0.1 (sine) further back from the fourth stride's swing on: the camera is 0.1 x lever less
+    # ahead of the ankle at its closing mid-stance, so the foot's third stride is longer than the camera's travel
+    leaning = motion.assign(lean_x=motion.lean_x + 0.1 * (motion.t_s > 2.2 + 0.7 * 1.1))
+    lean = FloorOdometryStride(shank_length_m=0.52, ankle_height_m=0.07, camera_from_knee_m=0.25).estimate(leaning, segments)
+    np.testing.assert_allclose(lean.strides_.length_m - s.length_m, [0, 0, 0.1 * 0.2, 0], atol=1e-9)
+    np.testing.assert_allclose(lean.anchors_.ahead_m - est.anchors_.ahead_m, [0, 0, 0, -0.02, -0.02], atol=1e-9)
     assert (s.source == "leg_camera").all() and (s.foot == "left").all()
     np.testing.assert_allclose(s.length_std_m / s.length_m, math.hypot(0.042, 0.008), rtol=1e-6)
     # a knee 2 cm higher than the leg's true one: the anchor, hence every stride, is that much higher
@@ -123,6 +138,13 @@ def test_odometry_bridges_short_losses_and_drops_long_ones():
     with warns("unmeasured"):
         est = FloorOdometryStride(shank_length_m=0.52, ankle_height_m=0.07, camera_from_knee_m=0.25).estimate(gone, segments)
     assert len(est.strides_) == 3 and not np.isclose(est.strides_.t_start_s, 1.1).any()
+    # a tenth of a stride lost where the camera moves fastest (a fifth of its travel) drops it; in the slowest, not
+    fast, slow = motion.copy(), motion.copy()
+    fast.loc[(fast.t_s > 1.1 + 0.20 * 1.1) & (fast.t_s < 1.1 + 0.30 * 1.1), "height_log_ratio"] = np.nan
+    slow.loc[(slow.t_s > 1.1 + 0.70 * 1.1) & (slow.t_s < 1.1 + 0.80 * 1.1), "height_log_ratio"] = np.nan
+    with warns("travel"):
+        assert len(FloorOdometryStride(shank_length_m=0.52).estimate(fast, segments).strides_) == 3
+    assert len(FloorOdometryStride(shank_length_m=0.52).estimate(slow, segments).strides_) == 4
 
 
 def test_odometry_bad_input():
@@ -167,6 +189,30 @@ def test_odometry_strides_hold_across_frame_rates_and_the_camera_leg():
         assert np.abs(errors).max() < 0.04, (name, errors)
     assert abs(np.mean(out["60"]) - np.mean(out["100"])) < 0.02
     assert abs(np.mean(out["right"]) - np.mean(out["100"])) < 0.02
+
+
+def test_odometry_strides_hold_with_the_camera_rolled_on_the_shank():
+    """Metamorphic: the camera turned 45 degrees about its optical axis (image x no longer along the walk) reads the
+    same strides: the floor directions are orthonormal whatever the roll."""
+    from pdr.pipelines.leg_camera import cut_strides
+    from pdr.sim.gait import WalkKinematics
+
+    kin = WalkKinematics.steady(speed_mps=1.3, duration_s=5.0, seed=4)
+    wide = dataclasses.replace(CAM, width_px=240, height_px=240, cx_px=119.5, cy_px=119.5)
+    frames, table = render_leg_camera(kin, wide, 0.5, 5.5, load_texture("gravel"), seed=5)
+    turn = cv2.getRotationMatrix2D((119.5, 119.5), 45.0, 1.0)
+    views = {"level": frames[:, 60:180, 40:200],
+             "rolled": np.stack([cv2.warpAffine(f, turn, (240, 240), flags=cv2.INTER_LINEAR)[60:180, 40:200] for f in frames])}
+    body = kin.body
+    true = kin.true_strides()
+    true = true[true.foot == "left"]
+    for name, view in views.items():
+        motion = HomographyCameraMotion(focal_px=CAM.focal_px, cx_px=CAM.cx_px, cy_px=CAM.cy_px).estimate(view, table.t_s).motion_
+        est = FloorOdometryStride(shank_length_m=body.shank_m + body.ankle_height_m, ankle_height_m=body.ankle_height_m,
+                                  camera_from_knee_m=CAM.distance_from_knee_m).estimate(motion, cut_strides(motion))
+        k = np.abs(true.t_start_s.to_numpy()[None, :] - est.strides_.t_start_s.to_numpy()[:, None]).argmin(axis=1)
+        errors = est.strides_.length_m.to_numpy() / true.length_m.to_numpy()[k] - 1
+        assert len(errors) >= 2 and np.abs(errors).max() < 0.015, (name, errors)
 
 
 def test_a_texture_less_stretch_of_floor_loses_its_strides_only(tmp_path):

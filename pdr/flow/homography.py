@@ -11,8 +11,9 @@ without any model of the walk:
   solutions);
 - the camera's displacement over the floor in units of ``d1``, projected on the floor plane (the
   decomposition's solution whose normal continues the previous one, ``cv2.decomposeHomographyMat``, Malis & Vargas
-  2007), along the floor projections of the image x and y axes;
-- the optical axis' tilt from the floor normal, where the camera moves enough for the normal to be determined.
+  2007), along two orthonormal floor directions, the image x axis' projection and the one perpendicular to it;
+- the optical axis' tilt from the floor normal and its lean (the axis' floor part, sin(tilt) long, along the same
+  two directions), where the camera moves enough for the normal to be determined.
 
 Metric scale is not in the images (a monocular camera sees the floor's geometry up to scale): the height itself comes
 from the leg (:class:`pdr.slip.FloorOdometryStride`).
@@ -32,8 +33,9 @@ from pdr.flow.methods import _as_frames
 
 HALF = np.diag([0.5, 0.5, 1.0])  # a homography's change of pixel coordinates to half the size
 ECC_CRITERIA = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 100, 1e-6)
+REFINE_CRITERIA = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 8, 1e-4)
 MOTION_COLUMNS = ["t_s", "dt_s", "height_log_ratio", "floor_x_per_height", "floor_y_per_height", "tilt_rad",
-                  "flow_x_pxps", "flow_y_pxps", "quality"]
+                  "lean_x", "lean_y", "flow_x_pxps", "flow_y_pxps", "quality"]
 
 
 class HomographyCameraMotion(Algorithm):
@@ -42,7 +44,11 @@ class HomographyCameraMotion(Algorithm):
     Parameters
     ----------
     focal_px, cx_px, cy_px : the camera's intrinsics at the frames' size (``camera.toml``).
-    blur_sigma_px : Gaussian pre-blur of both frames (px at the measured size), for the intensity gradients.
+    blur_sigma_px : Gaussian pre-blur of both frames (px at the measured size) while the homography is searched for
+        (smooth intensity gradients reach further); the homography is then refined on the frames unblurred. A blur
+        of fixed size in the image is not one on the floor when the two views' heights differ (the nearer view's
+        floor is blurred less): on the blurred frames the height ratio's log read 1-3% high on the leg-camera
+        benchmark's walks, which put the strides about 1% long.
     max_width_px : frames wider than this are halved (``cv2.pyrDown``) until they are not, the intrinsics with them:
         the homography's 8 parameters are determined by a 160 px view of a textured floor (the leg-camera benchmark's
         frames), and at 320 px the alignment took 20 times longer on the benchmark's 640x480 video (8 frames/s).
@@ -57,8 +63,10 @@ class HomographyCameraMotion(Algorithm):
     ----------
     motion_ : DataFrame, one row per frame pair: ``t_s`` (mid time), ``dt_s``, ``height_log_ratio`` (ln of the
         second frame's height over the first's), ``floor_x_per_height`` and ``floor_y_per_height`` (the camera's
-        displacement along the floor projections of the image x and y axes, in units of its height at the first
-        frame), ``tilt_rad`` (optical axis from the floor normal; NaN where not determined), ``flow_x_pxps`` and
+        displacement along the floor projection of the image x axis and the floor direction perpendicular to it,
+        on the image y axis' side, in units of its height at the first frame), ``tilt_rad`` (optical axis from the
+        floor normal; NaN where not determined), ``lean_x`` and ``lean_y`` (the optical axis' part along the floor,
+        in the same two directions: its sine of tilt split by direction; NaN where the tilt is), ``flow_x_pxps`` and
         ``flow_y_pxps`` (the image centre's flow, full-size px/s: the table is also a flow series, as
         :class:`CorrelationOpticalFlow`'s) and ``quality`` (ECC's correlation coefficient). Pairs not measured have
         NaN values and quality 0.
@@ -97,12 +105,12 @@ class HomographyCameraMotion(Algorithm):
             cv2.setNumThreads(threads)
         return self
 
-    def _prepared(self, frame: np.ndarray, width_px: float) -> np.ndarray:
-        """A frame halved down to ``width_px`` and pre-blurred."""
+    def _prepared(self, frame: np.ndarray, width_px: float) -> tuple[np.ndarray, np.ndarray]:
+        """A frame halved down to ``width_px``: pre-blurred, and as it is."""
         g = frame.astype(np.float32)
         while g.shape[1] > width_px + 0.5:
             g = cv2.pyrDown(g)
-        return cv2.GaussianBlur(g, (0, 0), self.blur_sigma_px) if self.blur_sigma_px > 0 else g
+        return (cv2.GaussianBlur(g, (0, 0), self.blur_sigma_px) if self.blur_sigma_px > 0 else g), g
 
     def _aligned(self, a: np.ndarray, b: np.ndarray, prev_warp: np.ndarray | None) -> tuple[float, np.ndarray | None]:
         """ECC's best homography from ``a`` to ``b``: from the last measured pair's (the motion is smooth), from the
@@ -131,15 +139,18 @@ class HomographyCameraMotion(Algorithm):
             scale /= 2.0
         k = self._intrinsics(scale)
         k_inv = np.linalg.inv(k)
-        out = np.full((max(n - 1, 0), 7), np.nan)
+        out = np.full((max(n - 1, 0), 9), np.nan)
         centre = np.array([(self.cx_px + 0.5) * scale - 0.5, (self.cy_px + 0.5) * scale - 0.5, 1.0])
         prev_warp, prev_normal = None, None
         b = self._prepared(frames[0], frames.shape[2] * scale) if n else None
         for i in range(n - 1):
             a, b = b, self._prepared(frames[i + 1], frames.shape[2] * scale)
-            best_cc, warp = self._aligned(a, b, prev_warp)
+            best_cc, warp = self._aligned(a[0], b[0], prev_warp)
             if warp is None or best_cc < self.min_correlation:
                 continue
+            if self.blur_sigma_px > 0:
+                _, refined = _align(a[1], b[1], warp, REFINE_CRITERIA)
+                warp = warp if refined is None else refined
             hn = k_inv @ warp.astype(np.float64) @ k  # maps the first view's rays to the second's
             hn /= np.linalg.svd(hn, compute_uv=False)[1]
             ratio = float(np.linalg.det(hn))
@@ -166,21 +177,31 @@ class HomographyCameraMotion(Algorithm):
             # the normal taken points up, towards the camera: the floor is n.X = -d, so H's translation is minus the
             # motion's and the camera's displacement in the first view's frame, in units of its height, is R^T t
             disp = r.T @ tr
-            axes = np.eye(3)[:2] - np.outer(np.eye(3)[:2] @ nr, nr)  # image x and y projected on the floor
-            axes /= np.linalg.norm(axes, axis=1, keepdims=True)
+            axes = _floor_axes(nr)
             out[i, 1], out[i, 2] = axes @ disp
             if np.linalg.norm(tr) >= self.min_translation:
                 prev_normal = nr
                 out[i, 3] = math.acos(min(1.0, abs(float(nr[2]))))
+                out[i, 7:9] = axes @ (np.array([0.0, 0.0, 1.0]) - nr[2] * nr)  # the optical axis' floor part
         return pd.DataFrame({"t_s": 0.5 * (t[1:] + t[:-1]), "dt_s": np.diff(t), "height_log_ratio": out[:, 0],
                              "floor_x_per_height": out[:, 1], "floor_y_per_height": out[:, 2], "tilt_rad": out[:, 3],
-                             "flow_x_pxps": out[:, 5], "flow_y_pxps": out[:, 6], "quality": np.nan_to_num(out[:, 4])})
+                             "lean_x": out[:, 7], "lean_y": out[:, 8], "flow_x_pxps": out[:, 5], "flow_y_pxps": out[:, 6],
+                             "quality": np.nan_to_num(out[:, 4])})
 
 
-def _align(a: np.ndarray, b: np.ndarray, start: np.ndarray) -> tuple[float, np.ndarray | None]:
+def _floor_axes(normal: np.ndarray) -> np.ndarray:
+    """Two orthonormal floor directions in the camera frame (rows): the image x axis projected on the floor, and the
+    image y axis' projection made perpendicular to it (both follow the camera whatever its roll on the shank)."""
+    x = np.array([1.0, 0.0, 0.0]) - normal[0] * normal
+    x /= np.linalg.norm(x)
+    y = np.cross(normal, x)
+    return np.stack([x, y if y[1] >= 0 else -y])
+
+
+def _align(a: np.ndarray, b: np.ndarray, start: np.ndarray, criteria=ECC_CRITERIA) -> tuple[float, np.ndarray | None]:
     """ECC's homography from ``a`` to ``b`` from ``start`` (correlation, warp), or (-1, None) where it does not
     converge (no texture, or too far from the start)."""
     try:
-        return cv2.findTransformECC(a, b, start.astype(np.float32), cv2.MOTION_HOMOGRAPHY, ECC_CRITERIA, None, 1)
+        return cv2.findTransformECC(a, b, start.astype(np.float32), cv2.MOTION_HOMOGRAPHY, criteria, None, 1)
     except cv2.error:
         return -1.0, None
