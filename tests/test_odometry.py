@@ -65,6 +65,19 @@ def test_homography_reads_the_height_ratio_the_floor_displacement_and_the_tilt(t
     np.testing.assert_allclose(np.degrees(np.nanmedian(m.tilt_rad)), tilt_deg, atol=1.0)
 
 
+@pytest.mark.parametrize("turn_deg, shift_px", [(10.0, 10.0), (30.0, 25.0)])
+def test_homography_follows_a_fast_turn_over_a_repeating_floor(turn_deg, shift_px):
+    # brick, the frame turned about its centre and shifted in one frame interval (a swinging shank's camera at 60
+    # frames/s): no shift start is near, the matched features' is; the centre moves by the shift, the height stays
+    floor = cv2.resize(load_texture("brick"), (320, 320))
+    turn = cv2.getRotationMatrix2D((159.5, 159.5), turn_deg, 1.0)
+    turn[0, 2] += shift_px
+    frames = np.stack([floor[100:220, 80:240], cv2.warpAffine(floor, turn, (320, 320))[100:220, 80:240]])
+    m = HomographyCameraMotion(focal_px=120.0, cx_px=79.5, cy_px=59.5).estimate(frames, [0.0, 0.01]).motion_
+    np.testing.assert_allclose(m[["flow_x_pxps", "flow_y_pxps"]].iloc[0], [100 * shift_px, 0.0], atol=2.0)
+    assert abs(m.height_log_ratio.iloc[0]) < 1e-3 and m.quality.iloc[0] > 0.9
+
+
 def test_homography_on_a_blank_floor_measures_nothing_and_bad_input_is_an_error():
     frames = np.full((5, 120, 160), 120, np.uint8)
     m = HomographyCameraMotion(focal_px=120.0, cx_px=79.5, cy_px=59.5).estimate(frames, np.arange(5) / 100.0).motion_

@@ -114,17 +114,17 @@ class HomographyCameraMotion(Algorithm):
 
     def _aligned(self, a: np.ndarray, b: np.ndarray, prev_warp: np.ndarray | None) -> tuple[float, np.ndarray | None]:
         """ECC's best homography from ``a`` to ``b``: from the last measured pair's (the motion is smooth), from the
-        global shift, then from the shift aligned at half size first (a fast swing can be beyond the full size's
-        reach); the first start correlating 0.9 or more is taken."""
+        global shift, from the shift aligned at half size first (a fast swing can be beyond the full size's reach),
+        then from matched features (a fast turning swing, where no shift is near); the first start correlating 0.9
+        or more is taken."""
         (dx, dy), _ = cv2.phaseCorrelate(a, b)
         shift = np.array([[1, 0, dx], [0, 1, dy], [0, 0, 1]], np.float32)
         best_cc, warp = -1.0, None
-        for start in ([prev_warp] if prev_warp is not None else []) + [shift, None]:
-            if start is None:
-                _, coarse = _align(cv2.pyrDown(a), cv2.pyrDown(b), HALF @ shift @ np.linalg.inv(HALF))
-                if coarse is None:
+        for start in ([prev_warp] if prev_warp is not None else []) + [shift, "coarse", "features"]:
+            if isinstance(start, str):
+                start = _coarse_start(a, b, shift) if start == "coarse" else _feature_start(a, b)
+                if start is None:
                     continue
-                start = np.linalg.inv(HALF) @ coarse @ HALF
             cc, w1 = _align(a, b, start)
             if cc > best_cc:
                 best_cc, warp = cc, w1
@@ -187,6 +187,28 @@ class HomographyCameraMotion(Algorithm):
                              "floor_x_per_height": out[:, 1], "floor_y_per_height": out[:, 2], "tilt_rad": out[:, 3],
                              "lean_x": out[:, 7], "lean_y": out[:, 8], "flow_x_pxps": out[:, 5], "flow_y_pxps": out[:, 6],
                              "quality": np.nan_to_num(out[:, 4])})
+
+
+def _coarse_start(a: np.ndarray, b: np.ndarray, shift: np.ndarray) -> np.ndarray | None:
+    """The homography aligned at half size from ``shift``, at full size (None where it does not converge)."""
+    _, coarse = _align(cv2.pyrDown(a), cv2.pyrDown(b), HALF @ shift @ np.linalg.inv(HALF))
+    return None if coarse is None else np.linalg.inv(HALF) @ coarse @ HALF
+
+
+def _feature_start(a: np.ndarray, b: np.ndarray) -> np.ndarray | None:
+    """The homography of ORB features matched between the frames (Rublee et al. 2011; cross-checked matches,
+    RANSAC with 2 px), or None where fewer than 8 agree. Patches of 15 px: a 160 px frame has room for them."""
+    orb = cv2.ORB_create(nfeatures=300, nlevels=4, edgeThreshold=15, patchSize=15, fastThreshold=5)
+    (ka, da), (kb, db) = (orb.detectAndCompute(np.clip(f, 0, 255).astype(np.uint8), None) for f in (a, b))
+    if da is None or db is None:
+        return None
+    matches = cv2.BFMatcher(cv2.NORM_HAMMING, crossCheck=True).match(da, db)
+    if len(matches) < 8:
+        return None
+    pa = np.float32([ka[m.queryIdx].pt for m in matches])
+    pb = np.float32([kb[m.trainIdx].pt for m in matches])
+    h, inliers = cv2.findHomography(pa, pb, cv2.RANSAC, 2.0)
+    return None if h is None or int(inliers.sum()) < 8 else h
 
 
 def _floor_axes(normal: np.ndarray) -> np.ndarray:
