@@ -24,10 +24,10 @@ from pdr.slip.fit import SEGMENT_COLUMNS, swing_unsampled
 
 MIDSTANCE_PHASE = (0.12, 0.31)  # Perry & Burnfield 2010: mid-stance, fraction of the gait cycle from heel strike
 # Per-user scale of the odometry strides: the spread of a person's mean stride error about none (their knee and mount
-# as a user measures them: 4.2%) and of a walk's mean around its person's (0.8%), read on the tuning group of
+# as a user measures them: 3.5%) and of a walk's mean around its person's (0.7%), read on the tuning group of
 # ``python -m benchmarks leg_camera`` (rows "people's mean stride error, RMS" and "SD within a person").
-ODOMETRY_PERSON_STD = 0.042
-ODOMETRY_WALK_STD = 0.008
+ODOMETRY_PERSON_STD = 0.035
+ODOMETRY_WALK_STD = 0.007
 ANCHOR_COLUMNS = ["t_s", "height_m", "tilt_rad", "log_offset", "ahead_m"]
 
 
