@@ -33,6 +33,7 @@ from pdr.flow.methods import _as_frames
 
 HALF = np.diag([0.5, 0.5, 1.0])  # a homography's change of pixel coordinates to half the size
 ECC_CRITERIA = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 100, 1e-6)
+# the refinement on the unblurred frames starts within a fraction of a pixel: a few iterations
 REFINE_CRITERIA = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 8, 1e-4)
 MOTION_COLUMNS = ["t_s", "dt_s", "height_log_ratio", "floor_x_per_height", "floor_y_per_height", "tilt_rad",
                   "lean_x", "lean_y", "flow_x_pxps", "flow_y_pxps", "quality"]
@@ -45,10 +46,9 @@ class HomographyCameraMotion(Algorithm):
     ----------
     focal_px, cx_px, cy_px : the camera's intrinsics at the frames' size (``camera.toml``).
     blur_sigma_px : Gaussian pre-blur of both frames (px at the measured size) while the homography is searched for
-        (smooth intensity gradients reach further); the homography is then refined on the frames unblurred. A blur
-        of fixed size in the image is not one on the floor when the two views' heights differ (the nearer view's
-        floor is blurred less): on the blurred frames the height ratio's log read 1-3% high on the leg-camera
-        benchmark's walks, which put the strides about 1% long.
+        (smooth intensity gradients reach further); the homography is then refined on the frames unblurred: aligned
+        on the blurred frames alone, the height ratio's log read 1-3% high on the leg-camera benchmark's walks
+        (the strides about 1% long), and a blur scaled to each pair's zoom did not remove it.
     max_width_px : frames wider than this are halved (``cv2.pyrDown``) until they are not, the intrinsics with them:
         the homography's 8 parameters are determined by a 160 px view of a textured floor (the leg-camera benchmark's
         frames), and at 320 px the alignment took 20 times longer on the benchmark's 640x480 video (8 frames/s).

@@ -172,7 +172,8 @@ class FloorOdometryStride(Algorithm):
             h = self.camera_height_m(tilt_frame[m])
             t_mid = heel_strike_s + 0.5 * (lo + hi) * period_s
             ahead_m = -self.lever_m * float(np.interp(t_mid, t_frame, lean_frame))
-            return t_mid, float(np.median(h)), float(np.median(tilt_frame[m])), float(np.median(np.log(h) - log_height[m])), ahead_m
+            offset = float(np.median(np.log(h) - log_height[m]))
+            return t_mid, float(np.median(h)), float(np.median(tilt_frame[m])), offset, ahead_m
 
         anchors = [anchor(s.t_start_s, s.t_end_s - s.t_start_s) for s in segments.itertuples(index=False)]
         self.anchors_ = pd.DataFrame([a for a in anchors if a is not None], columns=ANCHOR_COLUMNS)
@@ -193,9 +194,11 @@ class FloorOdometryStride(Algorithm):
             w = np.clip((t_frame[:-1] - ta) / (tb - ta), 0.0, 1.0)  # each pair's first frame, between the anchors
             step_m = rate * dt * np.exp(log_height[:-1] + oa + w * (ob - oa))
             travel_m = float(np.sum(step_m[p]))
+            if not travel_m > 0:
+                continue
             # the part of the travel bridged over unmeasured pairs: a gap in the fastest swing weighs more than one
             # in stance
-            bridged = float(np.sum(step_m[p & ~measured])) / travel_m if travel_m > 0 else 1.0
+            bridged = float(np.sum(step_m[p & ~measured])) / travel_m
             if bridged > self.max_bridged_fraction:
                 n_bridged += 1
                 continue
