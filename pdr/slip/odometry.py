@@ -131,7 +131,7 @@ class FloorOdometryStride(Algorithm):
                              f"{', '.join(SEGMENT_COLUMNS)}, missing {', '.join(missing)}")
         self.strides_ = pd.DataFrame({c: pd.Series(dtype=object if c in ("foot", "source") else float) for c in STRIDE_COLUMNS})
         self.anchors_ = pd.DataFrame({c: np.zeros(0) for c in ANCHOR_COLUMNS})
-        if self.camera_from_knee_m >= self.shank_length_m - self.ankle_height_m:
+        if self.lever_m <= 0:
             warn(f"FloorOdometryStride: camera {self.camera_from_knee_m:g} m below the knee, the shank (knee to ankle) "
                  f"is {self.shank_length_m - self.ankle_height_m:g} m: the mount is off the shank; no stride estimated")
             return self
